@@ -1,0 +1,222 @@
+//! The machine description file (`machines/*.toml`).
+
+use std::collections::BTreeMap;
+
+use kerf_interp::Axis;
+use kerf_motion::Limits;
+use serde::Deserialize;
+
+/// An error in a machine description: which file, which key, and why.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MachineError {
+    #[error("cannot read machine file {path}: {reason}")]
+    Read { path: String, reason: String },
+    #[error("{origin}: {message}")]
+    Syntax { origin: String, message: String },
+    #[error("{origin}: key `{key}`: {reason}")]
+    Key {
+        origin: String,
+        key: String,
+        reason: String,
+    },
+    #[error("unknown machine {name:?}: give an embedded name ({known}) or a path to a .toml file")]
+    UnknownMachine { name: String, known: String },
+}
+
+/// Travel and dynamics as written in TOML.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LimitsToml {
+    pub min: f64,
+    pub max: f64,
+    pub max_velocity: f64,
+    pub max_acceleration: f64,
+}
+
+/// One `[[joints]]` entry.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct JointToml {
+    pub name: String,
+    /// For trivial kinematics: the axis this joint drives.
+    pub axis: Option<String>,
+    pub min: f64,
+    pub max: f64,
+    pub max_velocity: f64,
+    pub max_acceleration: f64,
+}
+
+impl JointToml {
+    /// The joint's limits.
+    pub fn limits(&self) -> Limits {
+        Limits {
+            min: self.min,
+            max: self.max,
+            max_velocity: self.max_velocity,
+            max_acceleration: self.max_acceleration,
+        }
+    }
+}
+
+/// A parsed machine description.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Description {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// Kinematics module name, e.g. `trivial`.
+    pub kinematics: String,
+    /// Kinematics dimensions (module-specific keys).
+    #[serde(default)]
+    pub dimensions: BTreeMap<String, f64>,
+    /// Axis travel, keyed by lower-case axis letter.
+    pub axes: BTreeMap<String, LimitsToml>,
+    pub joints: Vec<JointToml>,
+    /// HAL wiring, interpreted by the io crate.
+    #[serde(default)]
+    pub hal: toml::Table,
+}
+
+impl Description {
+    /// Parse and validate description text; `origin` names it in errors.
+    pub fn parse(text: &str, origin: &str) -> Result<Description, MachineError> {
+        let d: Description = toml::from_str(text).map_err(|e| MachineError::Syntax {
+            origin: origin.to_string(),
+            message: e.to_string().trim_end().to_string(),
+        })?;
+        let key_err = |key: String, reason: String| MachineError::Key {
+            origin: origin.to_string(),
+            key,
+            reason,
+        };
+        for (name, l) in &d.axes {
+            if name.len() != 1 || Axis::from_letter(name.chars().next().unwrap()).is_none() {
+                return Err(key_err(
+                    format!("axes.{name}"),
+                    "not an axis letter (x y z a b c u v w)".into(),
+                ));
+            }
+            check_limits(
+                &format!("axes.{name}"),
+                l.min,
+                l.max,
+                l.max_velocity,
+                l.max_acceleration,
+            )
+            .map_err(|(k, r)| key_err(k, r))?;
+        }
+        if d.joints.is_empty() || d.joints.len() > kerf_motion::MAX_JOINTS {
+            return Err(key_err(
+                "joints".into(),
+                format!(
+                    "a machine has 1 to {} joints, found {}",
+                    kerf_motion::MAX_JOINTS,
+                    d.joints.len()
+                ),
+            ));
+        }
+        for (i, j) in d.joints.iter().enumerate() {
+            check_limits(
+                &format!("joints[{i}]"),
+                j.min,
+                j.max,
+                j.max_velocity,
+                j.max_acceleration,
+            )
+            .map_err(|(k, r)| key_err(k, r))?;
+        }
+        Ok(d)
+    }
+
+    /// The axes in canonical order with their limits.
+    pub fn axis_limits(&self) -> Vec<(Axis, Limits)> {
+        let mut v: Vec<(Axis, Limits)> = self
+            .axes
+            .iter()
+            .map(|(name, l)| {
+                (
+                    Axis::from_letter(name.chars().next().unwrap()).expect("validated in parse"),
+                    Limits {
+                        min: l.min,
+                        max: l.max,
+                        max_velocity: l.max_velocity,
+                        max_acceleration: l.max_acceleration,
+                    },
+                )
+            })
+            .collect();
+        v.sort_by_key(|(a, _)| *a);
+        v
+    }
+}
+
+fn check_limits(key: &str, min: f64, max: f64, vel: f64, acc: f64) -> Result<(), (String, String)> {
+    if !(min.is_finite() && max.is_finite() && min < max) {
+        return Err((
+            format!("{key}.min"),
+            format!("min ({min}) must be below max ({max})"),
+        ));
+    }
+    if !(vel.is_finite() && vel > 0.0) {
+        return Err((
+            format!("{key}.max_velocity"),
+            format!("must be a positive number, got {vel}"),
+        ));
+    }
+    if !(acc.is_finite() && acc > 0.0) {
+        return Err((
+            format!("{key}.max_acceleration"),
+            format!("must be a positive number, got {acc}"),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "m"
+kinematics = "trivial"
+[axes.x]
+min = 0.0
+max = 10.0
+max_velocity = 1.0
+max_acceleration = 1.0
+[[joints]]
+name = "x"
+axis = "x"
+min = 0.0
+max = 10.0
+max_velocity = 1.0
+max_acceleration = 1.0
+"#;
+
+    #[test]
+    fn parses_a_minimal_machine() {
+        let d = Description::parse(GOOD, "m.toml").unwrap();
+        assert_eq!(d.axis_limits()[0].0, Axis::X);
+    }
+
+    #[test]
+    fn bad_values_name_the_key() {
+        let bad = GOOD.replacen("max_velocity = 1.0", "max_velocity = -1.0", 1);
+        let e = Description::parse(&bad, "m.toml").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "m.toml: key `axes.x.max_velocity`: must be a positive number, got -1"
+        );
+    }
+
+    #[test]
+    fn unknown_keys_and_syntax_errors_name_the_line() {
+        let bad = GOOD.replacen("name = \"m\"", "name = \"m\"\nspeed = 3", 1);
+        let e = Description::parse(&bad, "m.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with("m.toml: ") && e.contains("speed") && e.contains("line 3"),
+            "{e}"
+        );
+    }
+}

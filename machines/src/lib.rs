@@ -1,0 +1,128 @@
+//! kerf-machines: machine kinematics and machine description files.
+//!
+//! A machine is described by a TOML file (see `docs/machines.md`) that picks
+//! a kinematics, gives its dimensions, the joint strokes and axis travel, and
+//! the HAL wiring. Descriptions of the standard machines are embedded in the
+//! binary; [`load`] takes an embedded name or a path to a TOML file.
+
+pub mod description;
+pub mod trivial;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use kerf_motion::Kinematics;
+
+pub use description::{Description, MachineError};
+
+/// Machine descriptions embedded in the binary, by name.
+pub const EMBEDDED: &[(&str, &str)] = &[("mill3", include_str!("../mill3.toml"))];
+
+/// The name of the machine kerfd runs when no configuration names one.
+pub const DEFAULT_MACHINE: &str = "mill3";
+
+/// A machine ready to run: its description and its kinematics.
+pub struct Machine {
+    pub description: Description,
+    pub kinematics: Arc<dyn Kinematics>,
+    /// Where the description came from: `embedded:NAME` or a file path.
+    pub origin: String,
+}
+
+impl std::fmt::Debug for Machine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Machine")
+            .field("name", &self.description.name)
+            .field("kinematics", &self.kinematics.name())
+            .field("origin", &self.origin)
+            .finish()
+    }
+}
+
+/// Load a machine by embedded name (e.g. `mill3`) or by TOML file path.
+///
+/// A spec containing `/` or ending in `.toml` is a path; anything else is an
+/// embedded name.
+pub fn load(spec: &str) -> Result<Machine, MachineError> {
+    if spec.contains('/') || spec.ends_with(".toml") {
+        let path = Path::new(spec);
+        let text = std::fs::read_to_string(path).map_err(|e| MachineError::Read {
+            path: spec.to_string(),
+            reason: e.to_string(),
+        })?;
+        return from_toml(&text, spec);
+    }
+    match EMBEDDED.iter().find(|(name, _)| *name == spec) {
+        Some((name, text)) => from_toml(text, &format!("embedded:{name}")),
+        None => Err(MachineError::UnknownMachine {
+            name: spec.to_string(),
+            known: EMBEDDED
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        }),
+    }
+}
+
+/// Build a machine from description text; `origin` names it in errors.
+pub fn from_toml(text: &str, origin: &str) -> Result<Machine, MachineError> {
+    let description = Description::parse(text, origin)?;
+    let kinematics: Arc<dyn Kinematics> = match description.kinematics.as_str() {
+        "trivial" => Arc::new(trivial::Trivial::from_description(&description, origin)?),
+        other => {
+            return Err(MachineError::Key {
+                origin: origin.to_string(),
+                key: "kinematics".into(),
+                reason: format!("unknown kinematics {other:?}; known: trivial"),
+            })
+        }
+    };
+    Ok(Machine {
+        description,
+        kinematics,
+        origin: origin.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use kerf_interp::Axis;
+
+    #[test]
+    fn embedded_mill3_has_the_promised_travel() {
+        let m = load("mill3").unwrap();
+        let travel: Vec<(Axis, f64, f64)> = m
+            .kinematics
+            .axes()
+            .iter()
+            .map(|a| (a.axis, a.limits.min, a.limits.max))
+            .collect();
+        assert_eq!(
+            travel,
+            vec![
+                (Axis::X, 0.0, 300.0),
+                (Axis::Y, 0.0, 200.0),
+                (Axis::Z, -100.0, 0.0)
+            ]
+        );
+        assert_eq!(m.kinematics.joints().len(), 3);
+        assert_eq!(
+            m.description.hal.get("backend").and_then(|v| v.as_str()),
+            Some("sim")
+        );
+    }
+
+    #[test]
+    fn unknown_name_lists_the_known_ones() {
+        let e = load("nosuch").unwrap_err().to_string();
+        assert!(e.contains("nosuch") && e.contains("mill3"), "{e}");
+    }
+
+    #[test]
+    fn missing_file_names_the_path() {
+        let e = load("/nonexistent/m.toml").unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/m.toml"), "{e}");
+    }
+}

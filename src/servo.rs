@@ -1,0 +1,276 @@
+//! The servo tick and the thread that paces it.
+//!
+//! One tick: take the executor's commanded pose for this period, map it to
+//! joints through the machine's kinematics, exchange setpoints and feedback
+//! with the HAL, map the feedback back to a pose, and publish a status
+//! snapshot. The tick allocates nothing, takes no lock and does no I/O (see
+//! `tests/servo_rt.rs`, which counts allocations): segments arrive through a
+//! lock-free SPSC queue and status leaves through a seqlock.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use kerf_interp::Position;
+use kerf_io::{Feedback, Hal, HalFault, Setpoints};
+use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, MAX_JOINTS};
+
+use crate::seqlock::Writer;
+
+const _: () = assert!(MAX_JOINTS == kerf_io::MAX_JOINTS);
+
+/// An item on the planner → servo queue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Queued {
+    /// A segment to execute.
+    Segment(Segment),
+    /// Every segment of program `program` before this marker is done.
+    ProgramEnd { program: u32 },
+}
+
+/// Why the servo stopped motion. `Copy`, so it fits in the snapshot.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ServoFault {
+    #[error("hardware: {0}")]
+    Hal(HalFault),
+    #[error("kinematics: {0}")]
+    Kinematics(KinematicsError),
+}
+
+/// What the servo thread publishes every tick.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Snapshot {
+    /// Ticks run since start.
+    pub ticks: u64,
+    /// Wake-ups that came a whole period or more late.
+    pub overruns: u64,
+    /// A segment is in progress.
+    pub moving: bool,
+    /// Source line of the current (or last) segment.
+    pub line: u32,
+    /// Id of the last program whose every segment has run (0: none yet).
+    pub program_done: u32,
+    /// Commanded tool position.
+    pub commanded: Position,
+    /// Tool position from joint feedback through forward kinematics.
+    pub position: Position,
+    /// Joint feedback positions; the first `joint_count` are used.
+    pub joints: [f64; MAX_JOINTS],
+    pub joint_count: usize,
+    /// Set when motion was stopped by a fault; latched.
+    pub fault: Option<ServoFault>,
+}
+
+impl Snapshot {
+    /// The snapshot of a machine at rest at `position`.
+    pub fn at_rest(position: Position, joints: &[f64]) -> Snapshot {
+        let mut j = [0.0; MAX_JOINTS];
+        j[..joints.len()].copy_from_slice(joints);
+        Snapshot {
+            ticks: 0,
+            overruns: 0,
+            moving: false,
+            line: 0,
+            program_done: 0,
+            commanded: position,
+            position,
+            joints: j,
+            joint_count: joints.len(),
+            fault: None,
+        }
+    }
+}
+
+/// Everything one servo tick touches.
+pub struct ServoTick {
+    period: f64,
+    executor: Executor,
+    kins: Arc<dyn Kinematics>,
+    hal: Box<dyn Hal>,
+    queue: rtrb::Consumer<Queued>,
+    setpoints: Setpoints,
+    feedback: Feedback,
+    snapshot: Snapshot,
+}
+
+impl ServoTick {
+    /// A tick of `period` seconds for a machine resting at `start`.
+    pub fn new(
+        period: f64,
+        start: Position,
+        kins: Arc<dyn Kinematics>,
+        hal: Box<dyn Hal>,
+        queue: rtrb::Consumer<Queued>,
+    ) -> Result<ServoTick, KinematicsError> {
+        let n = kins.joints().len();
+        let mut joints = [0.0; MAX_JOINTS];
+        kins.inverse(&start, &mut joints[..n])?;
+        let mut setpoints = Setpoints::default();
+        for (cmd, q) in setpoints.joints.iter_mut().zip(&joints[..n]) {
+            cmd.position = *q;
+        }
+        setpoints.enable = true;
+        Ok(ServoTick {
+            period,
+            executor: Executor::new(start),
+            kins,
+            hal,
+            queue,
+            setpoints,
+            feedback: Feedback::default(),
+            snapshot: Snapshot::at_rest(start, &joints[..n]),
+        })
+    }
+
+    /// The servo period in seconds.
+    pub fn period(&self) -> f64 {
+        self.period
+    }
+
+    /// The last published snapshot.
+    pub fn snapshot(&self) -> &Snapshot {
+        &self.snapshot
+    }
+
+    /// Run one servo period.
+    pub fn tick(&mut self) -> &Snapshot {
+        let snap = &mut self.snapshot;
+        snap.ticks += 1;
+        let n = snap.joint_count;
+        if snap.fault.is_none() {
+            let queue = &mut self.queue;
+            let mut done = snap.program_done;
+            let sample = self.executor.tick(self.period, || match queue.pop() {
+                Ok(Queued::Segment(s)) => Some(s),
+                Ok(Queued::ProgramEnd { program }) => {
+                    done = program;
+                    None
+                }
+                Err(_) => None,
+            });
+            snap.program_done = done;
+            snap.moving = sample.moving;
+            snap.line = sample.line;
+            let mut q = [0.0; MAX_JOINTS];
+            match self.kins.inverse(&sample.position, &mut q[..n]) {
+                Ok(()) => {
+                    snap.commanded = sample.position;
+                    for (cmd, &target) in self.setpoints.joints.iter_mut().zip(&q[..n]) {
+                        cmd.velocity = (target - cmd.position) / self.period;
+                        cmd.position = target;
+                    }
+                }
+                Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
+            }
+        }
+        // A fault disables the drives: they hold where they are.
+        self.setpoints.enable = snap.fault.is_none();
+        if let Err(e) = self
+            .hal
+            .exchange(self.period, &self.setpoints, &mut self.feedback)
+        {
+            snap.fault.get_or_insert(ServoFault::Hal(e));
+        }
+        for i in 0..n {
+            snap.joints[i] = self.feedback.joints[i].position;
+        }
+        match self.kins.forward(&snap.joints[..n], &snap.position) {
+            Ok(p) => snap.position = p,
+            Err(e) => {
+                snap.fault.get_or_insert(ServoFault::Kinematics(e));
+            }
+        }
+        if snap.fault.is_some() {
+            snap.moving = false;
+        }
+        &self.snapshot
+    }
+}
+
+/// A running servo thread.
+pub struct ServoThread {
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<()>>,
+}
+
+impl ServoThread {
+    /// Start ticking `tick` every period on the wall clock (CLOCK_MONOTONIC,
+    /// absolute deadlines, so sleep jitter does not accumulate), publishing
+    /// each snapshot to `status`.
+    pub fn spawn(
+        mut tick: ServoTick,
+        mut status: Writer<Snapshot>,
+    ) -> std::io::Result<ServoThread> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop_flag = stop.clone();
+        let period = Duration::from_secs_f64(tick.period());
+        let handle = std::thread::Builder::new()
+            .name("kerf-servo".into())
+            .spawn(move || {
+                let period_ns = period.as_nanos() as i64;
+                let mut deadline = now_ns();
+                let mut overruns = 0;
+                while !stop_flag.load(Ordering::Relaxed) {
+                    deadline += period_ns;
+                    sleep_until_ns(deadline);
+                    let late = now_ns() - deadline;
+                    if late >= period_ns {
+                        // Missed at least a whole period: count it and restart the
+                        // schedule from now rather than running a burst of ticks.
+                        overruns += 1;
+                        deadline = now_ns();
+                    }
+                    tick.tick();
+                    let mut snap = *tick.snapshot();
+                    snap.overruns = overruns;
+                    status.write(&snap);
+                }
+            })?;
+        Ok(ServoThread {
+            stop,
+            handle: Some(handle),
+        })
+    }
+
+    /// Stop the thread and wait for it.
+    pub fn stop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+impl Drop for ServoThread {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+fn now_ns() -> i64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    ts.tv_sec * 1_000_000_000 + ts.tv_nsec
+}
+
+fn sleep_until_ns(deadline: i64) {
+    let ts = libc::timespec {
+        tv_sec: deadline / 1_000_000_000,
+        tv_nsec: deadline % 1_000_000_000,
+    };
+    // SAFETY: valid timespec; an EINTR wake-up simply returns early and the
+    // lateness check in the loop handles it.
+    unsafe {
+        libc::clock_nanosleep(
+            libc::CLOCK_MONOTONIC,
+            libc::TIMER_ABSTIME,
+            &ts,
+            std::ptr::null_mut(),
+        );
+    }
+}
