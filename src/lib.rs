@@ -6,7 +6,9 @@
 //! * [`daemon`]: the command socket and program handling.
 //! * [`protocol`]: the socket's message types.
 //! * [`client`]: a blocking client for the `kerf` command.
+//! * [`cli`]: the `kerf` command's subcommands.
 
+pub mod cli;
 pub mod client;
 pub mod daemon;
 pub mod paths;
