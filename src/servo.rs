@@ -14,19 +14,28 @@ use std::time::Duration;
 
 use kerf_interp::Position;
 use kerf_io::{Feedback, Hal, HalFault, Setpoints};
-use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, MAX_JOINTS};
+use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, SegmentKind, MAX_JOINTS};
 
 use crate::seqlock::Writer;
 
 const _: () = assert!(MAX_JOINTS == kerf_io::MAX_JOINTS);
 
-/// An item on the planner → servo queue.
+/// An operator command for the servo thread, sent through a lock-free queue.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Queued {
-    /// A segment to execute.
-    Segment(Segment),
-    /// Every segment of program `program` before this marker is done.
-    ProgramEnd { program: u32 },
+pub enum ServoCommand {
+    /// Feed override factor, 0 to 2.
+    FeedOverride(f64),
+    /// Rapid override factor, 0 to 1.
+    RapidOverride(f64),
+    /// Feed hold on (decelerate on the path and wait) or off (resume).
+    Hold(bool),
+    /// Single-block mode on or off.
+    SingleBlock(bool),
+    /// In single-block mode, run the next source line.
+    Step,
+    /// Stop on the path, then discard the queue up to the `Stop` marker
+    /// tagged `program`, which the planner sends when it has stopped.
+    Abort { program: u32 },
 }
 
 /// Why the servo stopped motion. `Copy`, so it fits in the snapshot.
@@ -51,6 +60,15 @@ pub struct Snapshot {
     pub line: u32,
     /// Id of the last program whose every segment has run (0: none yet).
     pub program_done: u32,
+    /// Id of the last program that was aborted and flushed (0: none yet).
+    pub program_aborted: u32,
+    /// Path speed, mm/s.
+    pub velocity: f64,
+    /// Feed and rapid override factors in force.
+    pub feed_override: f64,
+    pub rapid_override: f64,
+    /// Feed hold is on.
+    pub hold: bool,
     /// Commanded tool position.
     pub commanded: Position,
     /// Tool position from joint feedback through forward kinematics.
@@ -73,6 +91,11 @@ impl Snapshot {
             moving: false,
             line: 0,
             program_done: 0,
+            program_aborted: 0,
+            velocity: 0.0,
+            feed_override: 1.0,
+            rapid_override: 1.0,
+            hold: false,
             commanded: position,
             position,
             joints: j,
@@ -88,7 +111,10 @@ pub struct ServoTick {
     executor: Executor,
     kins: Arc<dyn Kinematics>,
     hal: Box<dyn Hal>,
-    queue: rtrb::Consumer<Queued>,
+    queue: rtrb::Consumer<Segment>,
+    commands: rtrb::Consumer<ServoCommand>,
+    /// Aborting this program: stop, then flush to its marker.
+    aborting: Option<u32>,
     setpoints: Setpoints,
     feedback: Feedback,
     snapshot: Snapshot,
@@ -101,7 +127,8 @@ impl ServoTick {
         start: Position,
         kins: Arc<dyn Kinematics>,
         hal: Box<dyn Hal>,
-        queue: rtrb::Consumer<Queued>,
+        queue: rtrb::Consumer<Segment>,
+        commands: rtrb::Consumer<ServoCommand>,
     ) -> Result<ServoTick, KinematicsError> {
         let n = kins.joints().len();
         let mut joints = [0.0; MAX_JOINTS];
@@ -117,6 +144,8 @@ impl ServoTick {
             kins,
             hal,
             queue,
+            commands,
+            aborting: None,
             setpoints,
             feedback: Feedback::default(),
             snapshot: Snapshot::at_rest(start, &joints[..n]),
@@ -135,23 +164,48 @@ impl ServoTick {
 
     /// Run one servo period.
     pub fn tick(&mut self) -> &Snapshot {
+        while let Ok(cmd) = self.commands.pop() {
+            match cmd {
+                ServoCommand::FeedOverride(f) => self.executor.set_feed_override(f),
+                ServoCommand::RapidOverride(f) => self.executor.set_rapid_override(f),
+                ServoCommand::Hold(on) => self.executor.set_hold(on),
+                ServoCommand::SingleBlock(on) => self.executor.set_single_block(on),
+                ServoCommand::Step => self.executor.step(),
+                ServoCommand::Abort { program } => {
+                    self.aborting = Some(program);
+                    self.executor.set_hold(true);
+                }
+            }
+        }
         let snap = &mut self.snapshot;
         snap.ticks += 1;
         let n = snap.joint_count;
-        if snap.fault.is_none() {
-            let queue = &mut self.queue;
-            let mut done = snap.program_done;
-            let sample = self.executor.tick(self.period, || match queue.pop() {
-                Ok(Queued::Segment(s)) => Some(s),
-                Ok(Queued::ProgramEnd { program }) => {
-                    done = program;
-                    None
+        if let (Some(program), true) = (self.aborting, self.executor.velocity() == 0.0) {
+            // At rest: drop what is queued up to the planner's final marker.
+            while let Ok(seg) = self.queue.pop() {
+                if seg.kind == (SegmentKind::Stop { tag: program }) {
+                    self.aborting = None;
+                    snap.program_aborted = program;
+                    self.executor.reset_queue();
+                    self.executor.set_hold(false);
+                    break;
                 }
-                Err(_) => None,
-            });
-            snap.program_done = done;
+            }
+        }
+        if snap.fault.is_none() && self.aborting.is_none_or(|_| self.executor.velocity() > 0.0) {
+            let chunk = self
+                .queue
+                .read_chunk(self.queue.slots())
+                .expect("slots() items are readable");
+            let (head, tail) = chunk.as_slices();
+            let sample = self.executor.tick(self.period, head, tail);
+            chunk.commit(sample.consumed);
+            if let Some(tag) = sample.stopped_at {
+                snap.program_done = tag;
+            }
             snap.moving = sample.moving;
             snap.line = sample.line;
+            snap.velocity = sample.velocity;
             let mut q = [0.0; MAX_JOINTS];
             match self.kins.inverse(&sample.position, &mut q[..n]) {
                 Ok(()) => {
@@ -164,6 +218,9 @@ impl ServoTick {
                 Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
             }
         }
+        snap.hold = self.executor.is_held();
+        snap.feed_override = self.executor.feed_override();
+        snap.rapid_override = self.executor.rapid_override();
         // A fault disables the drives: they hold where they are.
         self.setpoints.enable = snap.fault.is_none();
         if let Err(e) = self

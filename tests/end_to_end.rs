@@ -71,7 +71,7 @@ fn inch_and_incremental_program_ends_at_the_computed_position() {
     }
     let again = status(&mut client);
     assert_eq!(again.state, MachineState::Idle);
-    assert_eq!(again.line, 8, "the last executed move is on line 8");
+    assert_eq!(again.line, 9, "the program ended on line 9 (M2)");
 }
 
 #[test]

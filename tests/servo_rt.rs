@@ -7,9 +7,9 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use kerf::servo::{Queued, ServoTick};
+use kerf::servo::{ServoCommand, ServoTick};
 use kerf_interp::{Interpreter, Position};
-use kerf_motion::Planner;
+use kerf_motion::{Planner, PlannerConfig, Segment, SegmentKind};
 
 struct Counting;
 
@@ -49,23 +49,41 @@ fn ticks_through_a_program_without_allocating() {
     let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
     let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
     let (mut producer, consumer) = rtrb::RingBuffer::new(256);
+    let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
 
-    let program =
-        "G21 G90 G0 X50 Y40 Z-10\nG1 X80 F900\nG4 P0.05\nG20 G91 G1 Y1 Z-0.1\nG0 X-1\nM2\n";
-    let mut planner = Planner::new(&*kins, Position::ZERO);
-    let mut expected_end = Position::ZERO;
+    let program = "G21 G90 G0 X50 Y40 Z-10\nG1 X80 F900\nY60\nX70 Y70\nG4 P0.05\nG20 G91 G1 Y1 Z-0.1\nG0 X-1\nM2\n";
+    let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
     for canon in Interpreter::new(program.as_bytes(), "rt.ngc", Position::ZERO) {
-        if let Some(seg) = planner.plan(&canon.unwrap()).unwrap() {
-            expected_end = seg.end;
-            producer.push(Queued::Segment(seg)).unwrap();
+        planner.plan(&canon.unwrap()).unwrap();
+        while let Some(seg) = planner.next_segment() {
+            producer.push(seg).unwrap();
         }
     }
-    producer.push(Queued::ProgramEnd { program: 1 }).unwrap();
+    let expected_end = planner.position();
+    producer
+        .push(Segment::marker(
+            SegmentKind::Stop { tag: 1 },
+            0,
+            expected_end,
+        ))
+        .unwrap();
 
-    let mut tick = ServoTick::new(0.001, Position::ZERO, kins, hal, consumer).unwrap();
+    let mut tick =
+        ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
     COUNTING.with(|c| c.set(true));
     let mut ticks = 0u64;
     while tick.snapshot().program_done != 1 && ticks < 1_000_000 {
+        // Exercise the operator commands on the way.
+        let cmd = match ticks {
+            100 => Some(ServoCommand::FeedOverride(1.5)),
+            200 => Some(ServoCommand::Hold(true)),
+            700 => Some(ServoCommand::Hold(false)),
+            800 => Some(ServoCommand::RapidOverride(0.5)),
+            _ => None,
+        };
+        if let Some(cmd) = cmd {
+            commands.push(cmd).unwrap();
+        }
         tick.tick();
         ticks += 1;
     }

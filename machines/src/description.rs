@@ -31,6 +31,8 @@ pub struct LimitsToml {
     pub max: f64,
     pub max_velocity: f64,
     pub max_acceleration: f64,
+    /// mm/s³; defaults to [`Limits::default_jerk`].
+    pub max_jerk: Option<f64>,
 }
 
 /// One `[[joints]]` entry.
@@ -44,6 +46,8 @@ pub struct JointToml {
     pub max: f64,
     pub max_velocity: f64,
     pub max_acceleration: f64,
+    /// mm/s³; defaults to [`Limits::default_jerk`].
+    pub max_jerk: Option<f64>,
 }
 
 impl JointToml {
@@ -54,6 +58,9 @@ impl JointToml {
             max: self.max,
             max_velocity: self.max_velocity,
             max_acceleration: self.max_acceleration,
+            max_jerk: self
+                .max_jerk
+                .unwrap_or_else(|| Limits::default_jerk(self.max_acceleration)),
         }
     }
 }
@@ -103,6 +110,7 @@ impl Description {
                 l.max,
                 l.max_velocity,
                 l.max_acceleration,
+                l.max_jerk,
             )
             .map_err(|(k, r)| key_err(k, r))?;
         }
@@ -123,6 +131,7 @@ impl Description {
                 j.max,
                 j.max_velocity,
                 j.max_acceleration,
+                j.max_jerk,
             )
             .map_err(|(k, r)| key_err(k, r))?;
         }
@@ -142,6 +151,9 @@ impl Description {
                         max: l.max,
                         max_velocity: l.max_velocity,
                         max_acceleration: l.max_acceleration,
+                        max_jerk: l
+                            .max_jerk
+                            .unwrap_or_else(|| Limits::default_jerk(l.max_acceleration)),
                     },
                 )
             })
@@ -151,7 +163,20 @@ impl Description {
     }
 }
 
-fn check_limits(key: &str, min: f64, max: f64, vel: f64, acc: f64) -> Result<(), (String, String)> {
+fn check_limits(
+    key: &str,
+    min: f64,
+    max: f64,
+    vel: f64,
+    acc: f64,
+    jerk: Option<f64>,
+) -> Result<(), (String, String)> {
+    if let Some(j) = jerk.filter(|j| !(j.is_finite() && *j > 0.0)) {
+        return Err((
+            format!("{key}.max_jerk"),
+            format!("must be a positive number, got {j}"),
+        ));
+    }
     if !(min.is_finite() && max.is_finite() && min < max) {
         return Err((
             format!("{key}.min"),

@@ -86,6 +86,10 @@ impl Kinematics for Trivial {
         &self.joints
     }
 
+    fn joint_axis(&self, joint: usize) -> Option<Axis> {
+        self.map.get(joint).copied()
+    }
+
     fn inverse(&self, pose: &Position, joints: &mut [f64]) -> Result<(), KinematicsError> {
         if joints.len() != self.map.len() {
             return Err(KinematicsError::JointCount {

@@ -15,16 +15,25 @@ pub const MAX_JOINTS: usize = 9;
 
 /// Travel and dynamic limits of one axis or joint.
 ///
-/// Units: mm, mm/s, mm/s² (degrees, deg/s, deg/s² for rotary ones).
+/// Units: mm, mm/s, mm/s², mm/s³ (degrees, deg/s, deg/s², deg/s³ for
+/// rotary ones).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
     pub min: f64,
     pub max: f64,
     pub max_velocity: f64,
     pub max_acceleration: f64,
+    /// Largest rate of change of acceleration.
+    pub max_jerk: f64,
 }
 
 impl Limits {
+    /// Jerk limit used when a machine description gives none: full
+    /// acceleration is reached in 20 ms.
+    pub fn default_jerk(max_acceleration: f64) -> f64 {
+        50.0 * max_acceleration
+    }
+
     /// True if `value` lies within `min..=max`, allowing `slack` either side.
     pub fn contains(&self, value: f64, slack: f64) -> bool {
         value >= self.min - slack && value <= self.max + slack
@@ -129,6 +138,14 @@ pub trait Kinematics: Send + Sync {
     /// The tool pose for joint positions `joints`. `seed` is a nearby pose
     /// (usually the last one) for kinematics that solve iteratively.
     fn forward(&self, joints: &[f64], seed: &Position) -> Result<Position, KinematicsError>;
+
+    /// `Some(axis)` when joint `joint` moves exactly with one axis (joint
+    /// position = axis position), as in trivial kinematics. The planner then
+    /// applies that joint's limits to the axis directly instead of sampling
+    /// the path through [`inverse`](Kinematics::inverse).
+    fn joint_axis(&self, _joint: usize) -> Option<Axis> {
+        None
+    }
 
     /// Check that `pose` is inside the axis travel, reachable, and that the
     /// joints it needs are inside their strokes.

@@ -2,19 +2,26 @@
 //!
 //! * [`kinematics`]: the [`Kinematics`] trait every machine implements
 //!   (tool pose ↔ joint positions, plus limits).
+//! * [`path`]: segment shapes (lines, arcs, corner blends) parametrised by
+//!   arc length.
 //! * [`plan`]: the planner, which turns [`kerf_interp::Canon`] into
-//!   [`Segment`]s with velocity profiles. It runs ahead of the machine and may
+//!   [`Segment`]s with their limits. It runs ahead of the machine and may
 //!   allocate.
 //! * [`exec`]: the [`Executor`], which advances along planned segments one
-//!   servo period at a time. It is real-time safe: no allocation, no locks,
-//!   no I/O.
+//!   servo period at a time with jerk-limited path speed. It is real-time
+//!   safe: no allocation, no locks, no I/O.
+
+// Numerical code over the nine axes indexes several parallel arrays by axis;
+// iterator chains over four zipped arrays would read worse.
+#![allow(clippy::needless_range_loop)]
 
 pub mod exec;
 pub mod kinematics;
+pub mod path;
 pub mod plan;
-pub mod profile;
+#[cfg(test)]
+mod testkit;
 
 pub use exec::{Executor, Sample};
 pub use kinematics::{AxisSpec, JointSpec, Kinematics, KinematicsError, Limits, MAX_JOINTS};
-pub use plan::{PlanError, Planner, Segment, SegmentKind};
-pub use profile::Trapezoid;
+pub use plan::{PathMode, PlanError, Planner, PlannerConfig, Segment, SegmentKind};

@@ -1,0 +1,427 @@
+//! Path geometry: the shapes a segment follows, parametrised by arc length.
+//!
+//! Every shape maps a distance `s` in `0..=length` (mm, or degrees for pure
+//! rotary moves) to a point in the nine machine axes, and gives the unit
+//! tangent and the curvature vector (second derivative by arc length) the
+//! planner needs to respect acceleration and jerk limits.
+
+/// A point or vector in the nine machine axes X Y Z A B C U V W.
+pub type Vec9 = [f64; 9];
+
+fn add(a: &Vec9, b: &Vec9, k: f64) -> Vec9 {
+    let mut r = [0.0; 9];
+    for i in 0..9 {
+        r[i] = a[i] + b[i] * k;
+    }
+    r
+}
+
+/// Euclidean norm.
+pub fn norm(v: &Vec9) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// A straight line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    pub start: Vec9,
+    pub end: Vec9,
+}
+
+/// A circular arc in a plane, optionally a helix along the plane's normal
+/// axis, with any other axes moving linearly.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Arc {
+    /// Indices of the plane's first and second axes (e.g. X=0, Y=1 for G17).
+    pub plane: (usize, usize),
+    /// Centre in the plane's two coordinates.
+    pub center: (f64, f64),
+    pub radius: f64,
+    /// Angle of the start point, radians, measured from the first axis.
+    pub start_angle: f64,
+    /// Signed sweep, radians: positive counter-clockwise (G3).
+    pub sweep: f64,
+    /// Start and end of every axis; the plane axes' entries are ignored,
+    /// the others move linearly with the angle (helix, rotary axes).
+    pub start: Vec9,
+    pub end: Vec9,
+}
+
+/// A G2-continuous corner blend: a quintic Bézier whose first three and
+/// last three control points lie on the incoming and outgoing lines, so its
+/// tangent matches both lines and its curvature is zero at both ends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Blend {
+    pub control: [Vec9; 6],
+    /// Arc length from the start at parameter u = i/16, i = 0..=16.
+    pub table: [f64; 17],
+}
+
+/// The shape of a segment.
+///
+/// Kept inline rather than boxed: segments are `Copy` values in a
+/// preallocated ring that the servo thread reads without allocating.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    Line(Line),
+    Arc(Arc),
+    Blend(Blend),
+}
+
+/// Where a point on a shape is, and how the shape bends there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub point: Vec9,
+    /// Unit tangent, d point / ds.
+    pub tangent: Vec9,
+    /// Curvature vector, d² point / ds².
+    pub curvature: Vec9,
+}
+
+impl Line {
+    /// Length by LinuxCNC's rule: XYZ distance if XYZ move, else ABC, else UVW.
+    pub fn length(&self) -> f64 {
+        let d: Vec9 = std::array::from_fn(|i| self.end[i] - self.start[i]);
+        let part = |r: std::ops::Range<usize>| d[r].iter().map(|x| x * x).sum::<f64>().sqrt();
+        [part(0..3), part(3..6), part(6..9)]
+            .into_iter()
+            .find(|&l| l > 0.0)
+            .unwrap_or(0.0)
+    }
+
+    /// d point / ds: the direction scaled so the path length is `length()`.
+    pub fn direction(&self) -> Vec9 {
+        let l = self.length();
+        if l == 0.0 {
+            return [0.0; 9];
+        }
+        std::array::from_fn(|i| (self.end[i] - self.start[i]) / l)
+    }
+}
+
+impl Arc {
+    fn axial_delta(&self) -> Vec9 {
+        let mut d: Vec9 = std::array::from_fn(|i| self.end[i] - self.start[i]);
+        d[self.plane.0] = 0.0;
+        d[self.plane.1] = 0.0;
+        d
+    }
+
+    /// Helix length: the in-plane arc and the linear axes (XYZ part only
+    /// when XYZ move, as for lines).
+    pub fn length(&self) -> f64 {
+        let d = self.axial_delta();
+        let xyz_axial: f64 = d[..3].iter().map(|x| x * x).sum();
+        let in_plane = self.radius * self.sweep.abs();
+        (in_plane * in_plane + xyz_axial).sqrt()
+    }
+}
+
+const BINOM5: [f64; 6] = [1.0, 5.0, 10.0, 10.0, 5.0, 1.0];
+
+impl Blend {
+    /// The blend of the corner at `corner` between incoming unit direction
+    /// `u_in` and outgoing `u_out`, starting `leg` before the corner and
+    /// ending `leg` after it.
+    ///
+    /// Its greatest distance from the corner is `0.375 · leg · |u_out − u_in| / 2`
+    /// · 2 = `0.375 · leg · 2 sin(θ/2)` for a turn of θ (see [`Blend::deviation`]).
+    pub fn corner(corner: &Vec9, u_in: &Vec9, u_out: &Vec9, leg: f64) -> Blend {
+        let control = [
+            add(corner, u_in, -leg),
+            add(corner, u_in, -0.6 * leg),
+            add(corner, u_in, -0.2 * leg),
+            add(corner, u_out, 0.2 * leg),
+            add(corner, u_out, 0.6 * leg),
+            add(corner, u_out, leg),
+        ];
+        let mut b = Blend {
+            control,
+            table: [0.0; 17],
+        };
+        for i in 0..16 {
+            let (u0, u1) = (i as f64 / 16.0, (i + 1) as f64 / 16.0);
+            b.table[i + 1] = b.table[i] + b.speed_integral(u0, u1);
+        }
+        b
+    }
+
+    /// Distance from the corner to the blend's midpoint, which is the blend's
+    /// greatest distance from the corner: `(1 + 5·0.6 + 10·0.2)/32 · leg · |u_out − u_in|`.
+    pub fn deviation(leg: f64, u_in: &Vec9, u_out: &Vec9) -> f64 {
+        let d: Vec9 = std::array::from_fn(|i| u_out[i] - u_in[i]);
+        6.0 / 32.0 * leg * norm(&d)
+    }
+
+    fn derivatives(&self, u: f64) -> (Vec9, Vec9, Vec9) {
+        let q = &self.control;
+        let w = 1.0 - u;
+        // Bernstein bases of degree 5, 4 and 3.
+        let b5: [f64; 6] =
+            std::array::from_fn(|k| BINOM5[k] * u.powi(k as i32) * w.powi(5 - k as i32));
+        let b4: [f64; 5] = std::array::from_fn(|k| {
+            [1.0, 4.0, 6.0, 4.0, 1.0][k] * u.powi(k as i32) * w.powi(4 - k as i32)
+        });
+        let b3: [f64; 4] = std::array::from_fn(|k| {
+            [1.0, 3.0, 3.0, 1.0][k] * u.powi(k as i32) * w.powi(3 - k as i32)
+        });
+        let mut p = [0.0; 9];
+        let mut d1 = [0.0; 9];
+        let mut d2 = [0.0; 9];
+        for i in 0..9 {
+            for k in 0..6 {
+                p[i] += b5[k] * q[k][i];
+            }
+            for k in 0..5 {
+                d1[i] += 5.0 * b4[k] * (q[k + 1][i] - q[k][i]);
+            }
+            for k in 0..4 {
+                d2[i] += 20.0 * b3[k] * (q[k + 2][i] - 2.0 * q[k + 1][i] + q[k][i]);
+            }
+        }
+        (p, d1, d2)
+    }
+
+    /// Arc length between parameters u0 and u1 (5-point Gauss–Legendre).
+    fn speed_integral(&self, u0: f64, u1: f64) -> f64 {
+        const X: [f64; 5] = [
+            0.0,
+            -0.538_469_310_105_683,
+            0.538_469_310_105_683,
+            -0.906_179_845_938_664,
+            0.906_179_845_938_664,
+        ];
+        const W: [f64; 5] = [
+            0.568_888_888_888_889,
+            0.478_628_670_499_366,
+            0.478_628_670_499_366,
+            0.236_926_885_056_189,
+            0.236_926_885_056_189,
+        ];
+        let (mid, half) = ((u0 + u1) / 2.0, (u1 - u0) / 2.0);
+        (0..5)
+            .map(|k| W[k] * norm(&self.derivatives(mid + half * X[k]).1))
+            .sum::<f64>()
+            * half
+    }
+
+    /// Total arc length.
+    pub fn length(&self) -> f64 {
+        self.table[16]
+    }
+
+    /// The Bézier parameter at arc length `s` (Newton from the table).
+    fn parameter(&self, s: f64) -> f64 {
+        let s = s.clamp(0.0, self.length());
+        let i = self.table.partition_point(|&t| t <= s).clamp(1, 16) - 1;
+        let (s0, s1) = (self.table[i], self.table[i + 1]);
+        let u0 = i as f64 / 16.0;
+        let mut u = u0
+            + if s1 > s0 {
+                (s - s0) / (s1 - s0) / 16.0
+            } else {
+                0.0
+            };
+        for _ in 0..3 {
+            let err = s0 + self.speed_integral(u0, u) - s;
+            let speed = norm(&self.derivatives(u).1);
+            if speed <= 0.0 {
+                break;
+            }
+            u = (u - err / speed).clamp(0.0, 1.0);
+        }
+        u
+    }
+}
+
+impl Shape {
+    /// Path length, mm (degrees for pure rotary moves).
+    pub fn length(&self) -> f64 {
+        match self {
+            Shape::Line(l) => l.length(),
+            Shape::Arc(a) => a.length(),
+            Shape::Blend(b) => b.length(),
+        }
+    }
+
+    /// Start point.
+    pub fn start(&self) -> Vec9 {
+        match self {
+            Shape::Line(l) => l.start,
+            Shape::Arc(a) => self.frame_arc(a, 0.0).point,
+            Shape::Blend(b) => b.control[0],
+        }
+    }
+
+    /// End point.
+    pub fn end(&self) -> Vec9 {
+        match self {
+            Shape::Line(l) => l.end,
+            Shape::Arc(a) => self.frame_arc(a, a.length()).point,
+            Shape::Blend(b) => b.control[5],
+        }
+    }
+
+    /// Point only, at arc length `s` (clamped to the shape).
+    pub fn point(&self, s: f64) -> Vec9 {
+        match self {
+            Shape::Line(l) => {
+                let len = l.length();
+                if len == 0.0 || s >= len {
+                    return l.end;
+                }
+                let f = (s / len).max(0.0);
+                std::array::from_fn(|i| l.start[i] + (l.end[i] - l.start[i]) * f)
+            }
+            _ => self.frame(s).point,
+        }
+    }
+
+    /// Point, tangent and curvature at arc length `s` (clamped to the shape).
+    pub fn frame(&self, s: f64) -> Frame {
+        match self {
+            Shape::Line(l) => Frame {
+                point: self.point(s),
+                tangent: l.direction(),
+                curvature: [0.0; 9],
+            },
+            Shape::Arc(a) => self.frame_arc(a, s),
+            Shape::Blend(b) => {
+                let u = b.parameter(s);
+                let (p, d1, d2) = b.derivatives(u);
+                let speed = norm(&d1);
+                let t: Vec9 = std::array::from_fn(|i| d1[i] / speed);
+                // d²p/ds² = (d2 − (d2·t) t) / |d1|²
+                let along: f64 = (0..9).map(|i| d2[i] * t[i]).sum();
+                let k: Vec9 = std::array::from_fn(|i| (d2[i] - along * t[i]) / (speed * speed));
+                Frame {
+                    point: p,
+                    tangent: t,
+                    curvature: k,
+                }
+            }
+        }
+    }
+
+    fn frame_arc(&self, a: &Arc, s: f64) -> Frame {
+        let len = a.length();
+        let f = if len > 0.0 {
+            (s / len).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let theta = a.start_angle + a.sweep * f;
+        let (sin, cos) = theta.sin_cos();
+        let axial = a.axial_delta();
+        let mut p: Vec9 = std::array::from_fn(|i| a.start[i] + axial[i] * f);
+        p[a.plane.0] = a.center.0 + a.radius * cos;
+        p[a.plane.1] = a.center.1 + a.radius * sin;
+        if len == 0.0 {
+            return Frame {
+                point: p,
+                tangent: [0.0; 9],
+                curvature: [0.0; 9],
+            };
+        }
+        // dθ/ds = sweep / len; the axial part moves at axial / len.
+        let w = a.sweep / len;
+        let mut t: Vec9 = std::array::from_fn(|i| axial[i] / len);
+        t[a.plane.0] = -a.radius * sin * w;
+        t[a.plane.1] = a.radius * cos * w;
+        let mut k = [0.0; 9];
+        k[a.plane.0] = -a.radius * cos * w * w;
+        k[a.plane.1] = -a.radius * sin * w * w;
+        Frame {
+            point: p,
+            tangent: t,
+            curvature: k,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn v(x: f64, y: f64, z: f64) -> Vec9 {
+        [x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    }
+
+    /// Numerical derivative of the point by arc length.
+    fn numeric(shape: &Shape, s: f64) -> (Vec9, Vec9) {
+        let h = 1e-4;
+        let (a, b, c) = (shape.point(s - h), shape.point(s), shape.point(s + h));
+        (
+            std::array::from_fn(|i| (c[i] - a[i]) / (2.0 * h)),
+            std::array::from_fn(|i| (c[i] - 2.0 * b[i] + a[i]) / (h * h)),
+        )
+    }
+
+    #[test]
+    fn helix_is_arc_length_parametrised_with_exact_curvature() {
+        // Radius 10 quarter turn, climbing 5 mm in Z: length sqrt((5π)² + 25).
+        let arc = Arc {
+            plane: (0, 1),
+            center: (0.0, 0.0),
+            radius: 10.0,
+            start_angle: 0.0,
+            sweep: std::f64::consts::FRAC_PI_2,
+            start: v(10.0, 0.0, 0.0),
+            end: v(0.0, 10.0, 5.0),
+        };
+        let shape = Shape::Arc(arc);
+        let len = ((5.0 * std::f64::consts::PI).powi(2) + 25.0).sqrt();
+        assert!((shape.length() - len).abs() < 1e-12);
+        let end = shape.end();
+        assert!(end
+            .iter()
+            .zip(v(0.0, 10.0, 5.0))
+            .all(|(a, b)| (a - b).abs() < 1e-12));
+        // Helix curvature r/(r² + c²) with c = pitch/2π: here c = 5/(π/2).
+        let c = 5.0 / std::f64::consts::FRAC_PI_2;
+        let kappa = 10.0 / (100.0 + c * c);
+        for s in [0.3, 4.0, 9.9] {
+            let f = shape.frame(s);
+            assert!((norm(&f.tangent) - 1.0).abs() < 1e-12);
+            assert!((norm(&f.curvature) - kappa).abs() < 1e-12);
+            let (d1, d2) = numeric(&shape, s);
+            for i in 0..9 {
+                assert!((d1[i] - f.tangent[i]).abs() < 1e-6);
+                assert!((d2[i] - f.curvature[i]).abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn blend_is_tangent_flat_at_its_ends_and_within_its_deviation() {
+        let corner = v(10.0, 0.0, 0.0);
+        let u_in = v(1.0, 0.0, 0.0);
+        let u_out = v(0.0, 1.0, 0.0);
+        let b = Blend::corner(&corner, &u_in, &u_out, 2.0);
+        let shape = Shape::Blend(b);
+        let start = shape.frame(0.0);
+        let end = shape.frame(shape.length());
+        for i in 0..9 {
+            assert!((start.tangent[i] - u_in[i]).abs() < 1e-12);
+            assert!((end.tangent[i] - u_out[i]).abs() < 1e-12);
+        }
+        assert!(norm(&start.curvature) < 1e-12 && norm(&end.curvature) < 1e-12);
+        // Midpoint distance from the corner: 6/32 · 2 · sqrt(2).
+        let want = Blend::deviation(2.0, &u_in, &u_out);
+        assert!((want - 6.0 / 32.0 * 2.0 * 2f64.sqrt()).abs() < 1e-12);
+        let mid = shape.point(shape.length() / 2.0);
+        let dmid = norm(&std::array::from_fn(|i| mid[i] - corner[i]));
+        assert!((dmid - want).abs() < 1e-9, "{dmid} vs {want}");
+        // Arc length parametrisation: numerical |dp/ds| = 1 and matches the frame.
+        for k in 1..10 {
+            let s = shape.length() * k as f64 / 10.0;
+            let (d1, d2) = numeric(&shape, s);
+            let f = shape.frame(s);
+            assert!((norm(&d1) - 1.0).abs() < 1e-6, "speed {} at {s}", norm(&d1));
+            for i in 0..3 {
+                assert!((d2[i] - f.curvature[i]).abs() < 1e-3, "curvature at {s}");
+            }
+        }
+    }
+}
