@@ -15,3 +15,4 @@ pub mod paths;
 pub mod protocol;
 pub mod seqlock;
 pub mod servo;
+pub mod svg;

@@ -17,6 +17,7 @@
 
 pub mod exec;
 pub mod kinematics;
+pub mod offline;
 pub mod path;
 pub mod plan;
 #[cfg(test)]

@@ -38,6 +38,36 @@ enum Cmd {
         /// The program file.
         file: PathBuf,
     },
+    /// Check a program offline against a machine's travel, reach and
+    /// joint strokes; exits non-zero with the list of violations.
+    Check {
+        /// The program file.
+        file: PathBuf,
+        /// Machine: embedded name or TOML file.
+        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
+        machine: String,
+        /// Print the result as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Plan a program offline: cycle time, path deviation, limit use.
+    Plan {
+        /// The program file.
+        file: PathBuf,
+        /// Machine: embedded name or TOML file.
+        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
+        machine: String,
+        /// Write an SVG plot of the path and of position, joints and feed
+        /// against time.
+        #[arg(long, value_name = "OUT.svg")]
+        plot: Option<PathBuf>,
+        /// Print the result as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Acceleration-limited (trapezoidal) profiles instead of jerk-limited.
+        #[arg(long)]
+        trapezoidal: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -50,6 +80,18 @@ fn main() -> ExitCode {
         Cmd::Status { json } => cli::status::status(&socket, json),
         Cmd::Run { file } => cli::run::run(&socket, &file),
         Cmd::Canon { file } => cli::canon::canon(&file),
+        Cmd::Check {
+            file,
+            machine,
+            json,
+        } => cli::plan::check(&file, &machine, json),
+        Cmd::Plan {
+            file,
+            machine,
+            plot,
+            json,
+            trapezoidal,
+        } => cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,6 +4,7 @@
 //! `src/bin/kerf.rs` only parses arguments and dispatches.
 
 pub mod canon;
+pub mod plan;
 pub mod run;
 pub mod status;
 

@@ -1,0 +1,315 @@
+//! Offline runs: a program through the planner and the executor on a
+//! virtual clock, with the figures a person checks a plan by.
+//!
+//! The figures are measured on the sampled trajectory itself, not taken
+//! from the planner's bookkeeping: deviation is the distance of each
+//! commanded point from the programmed moves, and limit use comes from
+//! finite differences of the commanded axis and joint positions.
+
+use std::collections::VecDeque;
+
+use kerf_interp::{Canon, CanonCmd, InterpError, Position};
+
+use crate::exec::Executor;
+use crate::kinematics::{Kinematics, MAX_JOINTS};
+use crate::path::Vec9;
+use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SegmentKind};
+
+/// Why an offline run stopped early.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum RunError {
+    #[error("{0}")]
+    Interp(#[from] InterpError),
+    #[error("{0}")]
+    Plan(#[from] PlanError),
+    #[error("kinematics failed at t = {time:.3} s: {message}")]
+    Kinematics { time: f64, message: String },
+}
+
+/// Largest use of one kind of limit, as a fraction of the limit, and where.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Use {
+    pub ratio: f64,
+    /// Time of the worst sample, s.
+    pub time: f64,
+    /// Source line executing then.
+    pub line: u32,
+}
+
+impl Use {
+    fn see(&mut self, ratio: f64, time: f64, line: u32) {
+        if ratio > self.ratio {
+            *self = Use { ratio, time, line };
+        }
+    }
+}
+
+/// Limit use of one axis or joint.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LimitUse {
+    pub name: String,
+    pub velocity: Use,
+    pub acceleration: Use,
+    pub jerk: Use,
+}
+
+impl LimitUse {
+    /// The largest of velocity, acceleration and jerk use.
+    pub fn worst(&self) -> f64 {
+        self.velocity
+            .ratio
+            .max(self.acceleration.ratio)
+            .max(self.jerk.ratio)
+    }
+}
+
+/// One recorded point of the trajectory (for plots).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Point {
+    pub time: f64,
+    pub position: Position,
+    pub joints: [f64; MAX_JOINTS],
+    /// Path speed, mm/s.
+    pub velocity: f64,
+}
+
+/// The result of an offline run.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Report {
+    /// Time from start to the end of the last move, s.
+    pub cycle_time: f64,
+    /// Segments planned (moves, blends, dwells).
+    pub segments: usize,
+    /// Largest distance of the commanded tool point from the programmed
+    /// moves, mm.
+    pub max_deviation: f64,
+    pub axes: Vec<LimitUse>,
+    pub joints: Vec<LimitUse>,
+    /// Up to `record` evenly spaced points of the trajectory.
+    pub points: Vec<Point>,
+    /// The programmed path as polylines of XYZ points (for plots).
+    pub programmed: Vec<[f64; 3]>,
+}
+
+impl Report {
+    /// The largest limit use of any axis or joint.
+    pub fn max_limit_ratio(&self) -> f64 {
+        self.axes
+            .iter()
+            .chain(&self.joints)
+            .map(LimitUse::worst)
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Settings of an offline run.
+#[derive(Clone, Copy, Debug)]
+pub struct RunConfig {
+    pub planner: PlannerConfig,
+    /// Points to keep for plots (0: none).
+    pub record: usize,
+}
+
+/// A programmed move, kept while the executor may still be near it.
+#[derive(Clone, Copy, Debug)]
+struct Programmed {
+    line: u32,
+    start: Vec9,
+    end: Vec9,
+}
+
+/// Distance from `p` to the segment a–b in XYZ.
+fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
+    let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
+    let w: [f64; 3] = std::array::from_fn(|i| p[i] - a[i]);
+    let dd: f64 = d.iter().map(|x| x * x).sum();
+    let t = if dd > 0.0 {
+        (w.iter().zip(&d).map(|(x, y)| x * y).sum::<f64>() / dd).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (0..3)
+        .map(|i| (w[i] - t * d[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Finite-difference limit tracker for one coordinate.
+#[derive(Clone, Copy, Debug, Default)]
+struct Differences {
+    last: [f64; 3],
+    seen: usize,
+}
+
+impl Differences {
+    /// Push a sample; returns (velocity, acceleration, jerk) once defined.
+    fn push(&mut self, x: f64, dt: f64) -> [Option<f64>; 3] {
+        let [p1, p2, p3] = self.last;
+        let out = [
+            (self.seen >= 1).then(|| (x - p1) / dt),
+            (self.seen >= 2).then(|| (x - 2.0 * p1 + p2) / (dt * dt)),
+            (self.seen >= 3).then(|| (x - 3.0 * p1 + 3.0 * p2 - p3) / (dt * dt * dt)),
+        ];
+        self.last = [x, p1, p2];
+        self.seen += 1;
+        out
+    }
+}
+
+/// Run `program` (canon, in order) on `kins` from `start` with servo period
+/// `config.planner.period`, and measure it.
+pub fn run(
+    program: impl IntoIterator<Item = Result<Canon, InterpError>>,
+    kins: &dyn Kinematics,
+    start: Position,
+    config: RunConfig,
+) -> Result<Report, RunError> {
+    let dt = config.planner.period;
+    let mut planner = Planner::new(kins, start, config.planner);
+    let mut queue: VecDeque<Segment> = VecDeque::new();
+    let mut executor = Executor::new(start);
+    let mut report = Report::default();
+    let mut programmed: VecDeque<Programmed> = VecDeque::new();
+    let mut last_end = start.to_array();
+    let njoints = kins.joints().len();
+
+    let axis_specs = kins.axes().to_vec();
+    report.axes = axis_specs
+        .iter()
+        .map(|a| LimitUse {
+            name: a.axis.to_string(),
+            ..Default::default()
+        })
+        .collect();
+    report.joints = kins
+        .joints()
+        .iter()
+        .map(|j| LimitUse {
+            name: j.name.clone(),
+            ..Default::default()
+        })
+        .collect();
+    let mut axis_diff = vec![Differences::default(); axis_specs.len()];
+    let mut joint_diff = vec![Differences::default(); njoints];
+    let mut all_points = Vec::new();
+    let mut ticks: u64 = 0;
+    let mut program = program.into_iter();
+    let mut program_done = false;
+    // Keep the queue this deep so the executor's look ahead is not starved.
+    const DEPTH: usize = 4096;
+
+    loop {
+        while !program_done && queue.len() < DEPTH {
+            match program.next() {
+                None => {
+                    planner.finish();
+                    program_done = true;
+                }
+                Some(canon) => {
+                    let canon = canon?;
+                    if let CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end } =
+                        canon.cmd
+                    {
+                        let end = end.to_array();
+                        programmed.push_back(Programmed {
+                            line: canon.source.line,
+                            start: last_end,
+                            end,
+                        });
+                        report.programmed.push([end[0], end[1], end[2]]);
+                        last_end = end;
+                    }
+                    planner.plan(&canon)?;
+                }
+            }
+            while let Some(seg) = planner.next_segment() {
+                report.segments += 1;
+                queue.push_back(seg);
+            }
+            if program_done {
+                queue.push_back(Segment::marker(
+                    SegmentKind::Stop { tag: 1 },
+                    0,
+                    planner.position(),
+                ));
+            }
+        }
+        let (a, b) = queue.as_slices();
+        let sample = executor.tick(dt, a, b);
+        queue.drain(..sample.consumed);
+        ticks += 1;
+        let time = ticks as f64 * dt;
+        let p = sample.position.to_array();
+
+        // Deviation: distance to the nearest programmed move around the
+        // executing line (blends sit between two moves).
+        while programmed.len() > 2 && programmed[1].line < sample.line {
+            programmed.pop_front();
+        }
+        let near = programmed
+            .iter()
+            .take_while(|m| m.line <= sample.line + 1)
+            .map(|m| distance_to_segment(&p, &m.start, &m.end))
+            .fold(f64::INFINITY, f64::min);
+        if near.is_finite() {
+            report.max_deviation = report.max_deviation.max(near);
+        }
+
+        for (k, spec) in axis_specs.iter().enumerate() {
+            let d = axis_diff[k].push(p[spec.axis.index()], dt);
+            let l = spec.limits;
+            let u = &mut report.axes[k];
+            if let Some(v) = d[0] {
+                u.velocity.see(v.abs() / l.max_velocity, time, sample.line);
+            }
+            if let Some(a) = d[1] {
+                u.acceleration
+                    .see(a.abs() / l.max_acceleration, time, sample.line);
+            }
+            if let (Some(j), true) = (d[2], config.planner.jerk_limited) {
+                u.jerk.see(j.abs() / l.max_jerk, time, sample.line);
+            }
+        }
+        let mut q = [0.0; MAX_JOINTS];
+        kins.inverse(&sample.position, &mut q[..njoints])
+            .map_err(|e| RunError::Kinematics {
+                time,
+                message: e.describe(kins),
+            })?;
+        for (k, spec) in kins.joints().iter().enumerate() {
+            let d = joint_diff[k].push(q[k], dt);
+            let l = spec.limits;
+            let u = &mut report.joints[k];
+            if let Some(v) = d[0] {
+                u.velocity.see(v.abs() / l.max_velocity, time, sample.line);
+            }
+            if let Some(a) = d[1] {
+                u.acceleration
+                    .see(a.abs() / l.max_acceleration, time, sample.line);
+            }
+            if let (Some(j), true) = (d[2], config.planner.jerk_limited) {
+                u.jerk.see(j.abs() / l.max_jerk, time, sample.line);
+            }
+        }
+        if config.record > 0 {
+            all_points.push(Point {
+                time,
+                position: sample.position,
+                joints: q,
+                velocity: sample.velocity,
+            });
+        }
+        if sample.stopped_at == Some(1) {
+            report.cycle_time = time;
+            break;
+        }
+    }
+    if config.record > 0 && !all_points.is_empty() {
+        let step = (all_points.len() / config.record).max(1);
+        report.points = all_points.iter().step_by(step).copied().collect();
+        if let Some(last) = all_points.last() {
+            report.points.push(*last);
+        }
+    }
+    Ok(report)
+}

@@ -1,0 +1,216 @@
+//! `kerf plan` and `kerf check`: plan a program offline for a machine.
+
+use std::path::Path;
+
+use kerf_interp::{Interpreter, Position};
+use kerf_motion::offline::{self, LimitUse, Report, RunConfig};
+use kerf_motion::{Planner, PlannerConfig};
+use serde_json::json;
+
+use super::Failure;
+use crate::svg::{Chart, Series};
+
+fn load(machine: &str) -> Result<kerf_machines::Machine, Failure> {
+    kerf_machines::load(machine).map_err(|e| Failure::new(e.to_string()))
+}
+
+fn open(file: &Path) -> Result<Interpreter<std::io::BufReader<std::fs::File>>, Failure> {
+    Interpreter::open(file, Position::ZERO)
+        .map_err(|e| Failure::new(format!("{}: {e}", file.display())))
+}
+
+/// `kerf check`: interpret the whole program and check every move against
+/// the machine's travel, reach and joint strokes. Lists every violation.
+pub fn check(file: &Path, machine: &str, json_out: bool) -> Result<(), Failure> {
+    let machine = load(machine)?;
+    let kins = &*machine.kinematics;
+    let mut planner = Planner::new(kins, Position::ZERO, PlannerConfig::default());
+    let mut problems = Vec::new();
+    let mut moves = 0usize;
+    for canon in open(file)? {
+        match canon {
+            Err(e) => {
+                problems.push(e.to_string());
+                break;
+            }
+            Ok(c) => {
+                if let Err(e) = planner.plan(&c) {
+                    problems.push(e.to_string());
+                }
+                while planner.next_segment().is_some() {
+                    moves += 1;
+                }
+            }
+        }
+    }
+    if json_out {
+        println!(
+            "{}",
+            json!({"ok": problems.is_empty(), "segments": moves, "violations": problems})
+        );
+    } else if problems.is_empty() {
+        println!(
+            "{}: ok ({moves} segments within the limits of {})",
+            file.display(),
+            machine.description.name
+        );
+    } else {
+        for p in &problems {
+            println!("{p}");
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(Failure::new(format!("{} violation(s)", problems.len())))
+    }
+}
+
+/// `kerf plan`: plan and execute the program on a virtual clock, print
+/// cycle time, largest path deviation and limit use, and optionally plot.
+pub fn plan(
+    file: &Path,
+    machine: &str,
+    plot: Option<&Path>,
+    json_out: bool,
+    trapezoidal: bool,
+) -> Result<(), Failure> {
+    let machine = load(machine)?;
+    let kins = &*machine.kinematics;
+    let config = RunConfig {
+        planner: PlannerConfig {
+            jerk_limited: !trapezoidal,
+            ..PlannerConfig::default()
+        },
+        record: if plot.is_some() { 2000 } else { 0 },
+    };
+    let report = offline::run(open(file)?, kins, Position::ZERO, config)
+        .map_err(|e| Failure::new(e.to_string()))?;
+    if let Some(out) = plot {
+        let names: Vec<String> = kins.joints().iter().map(|j| j.name.clone()).collect();
+        write_plot(out, &report, &names)
+            .map_err(|e| Failure::new(format!("{}: {e}", out.display())))?;
+    }
+    if json_out {
+        let uses = |v: &[LimitUse]| {
+            v.iter()
+                .map(|u| {
+                    json!({"name": u.name, "velocity": u.velocity.ratio, "acceleration": u.acceleration.ratio, "jerk": u.jerk.ratio})
+                })
+                .collect::<Vec<_>>()
+        };
+        println!(
+            "{}",
+            json!({
+                "cycle_time_s": report.cycle_time,
+                "max_deviation_mm": report.max_deviation,
+                "max_limit_ratio": report.max_limit_ratio(),
+                "segments": report.segments,
+                "axes": uses(&report.axes),
+                "joints": uses(&report.joints),
+            })
+        );
+        return Ok(());
+    }
+    println!("machine          {}", machine.description.name);
+    println!("cycle time       {:.3} s", report.cycle_time);
+    println!("segments         {}", report.segments);
+    println!("max deviation    {:.6} mm", report.max_deviation);
+    println!("max limit use    {:.6}", report.max_limit_ratio());
+    println!();
+    println!(
+        "{:<8} {:>10} {:>10} {:>10}   worst at",
+        "", "velocity", "accel", "jerk"
+    );
+    for (kind, list) in [("axis", &report.axes), ("joint", &report.joints)] {
+        for u in list.iter() {
+            let worst = [u.velocity, u.acceleration, u.jerk]
+                .into_iter()
+                .max_by(|a, b| a.ratio.total_cmp(&b.ratio))
+                .unwrap_or_default();
+            println!(
+                "{:<8} {:>10.4} {:>10.4} {:>10.4}   line {} at {:.3} s",
+                format!("{kind} {}", u.name),
+                u.velocity.ratio,
+                u.acceleration.ratio,
+                u.jerk.ratio,
+                worst.line,
+                worst.time
+            );
+        }
+    }
+    Ok(())
+}
+
+fn write_plot(out: &Path, report: &Report, joint_names: &[String]) -> std::io::Result<()> {
+    let pts = &report.points;
+    let time: Vec<f64> = pts.iter().map(|p| p.time).collect();
+    let path = Chart {
+        title: "Tool path (XY): programmed and planned".into(),
+        x_label: "X, mm".into(),
+        y_label: "Y, mm".into(),
+        equal_aspect: true,
+        series: vec![
+            Series::new(
+                "programmed",
+                report.programmed.iter().map(|p| (p[0], p[1])).collect(),
+            ),
+            Series::new(
+                "planned",
+                pts.iter().map(|p| (p.position.x, p.position.y)).collect(),
+            ),
+        ],
+    };
+    let tool = Chart {
+        title: "Tool tip against time".into(),
+        x_label: "t, s".into(),
+        y_label: "mm".into(),
+        equal_aspect: false,
+        series: ["X", "Y", "Z"]
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Series::new(
+                    n,
+                    time.iter()
+                        .zip(pts)
+                        .map(|(t, p)| (*t, p.position.to_array()[i]))
+                        .collect(),
+                )
+            })
+            .collect(),
+    };
+    let joints = Chart {
+        title: "Joint positions against time".into(),
+        x_label: "t, s".into(),
+        y_label: "joint units".into(),
+        equal_aspect: false,
+        series: joint_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Series::new(
+                    n,
+                    time.iter()
+                        .zip(pts)
+                        .map(|(t, p)| (*t, p.joints[i]))
+                        .collect(),
+                )
+            })
+            .collect(),
+    };
+    let feed = Chart {
+        title: "Feed against time".into(),
+        x_label: "t, s".into(),
+        y_label: "mm/min".into(),
+        equal_aspect: false,
+        series: vec![Series::new(
+            "path feed",
+            time.iter()
+                .zip(pts)
+                .map(|(t, p)| (*t, p.velocity * 60.0))
+                .collect(),
+        )],
+    };
+    std::fs::write(out, crate::svg::page(&[path, tool, joints, feed]))
+}
