@@ -1,0 +1,100 @@
+//! The offline tools through the real `kerf` binary.
+
+use std::process::Command;
+
+fn kerf(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn program(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
+    let path = dir.path().join(name);
+    std::fs::write(&path, text).unwrap();
+    path.display().to_string()
+}
+
+#[test]
+fn check_lists_every_violation_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(
+        &dir,
+        "bad.ngc",
+        "G0 X10\nG1 Z-150 F100\nG1 X400\nG1 X20\nM2\n",
+    );
+    let out = kerf(&["check", &p]);
+    assert_eq!(out.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("bad.ngc:2: ") && text.contains("axis Z at -150"),
+        "{text}"
+    );
+    assert!(
+        text.contains("bad.ngc:3: ") && text.contains("axis X at 400"),
+        "{text}"
+    );
+    // Line 4 stays at Z-150 from line 2, so it is outside the travel too.
+    assert!(
+        text.contains("bad.ngc:4: ") && text.contains("axis Z at -150"),
+        "{text}"
+    );
+    assert_eq!(text.lines().count(), 3, "{text}");
+
+    let good = program(&dir, "good.ngc", "G0 X10 Y10\nG1 Z-5 F100\nM2\n");
+    let out = kerf(&["check", &good, "--json"]);
+    assert!(out.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["ok"], true);
+}
+
+#[test]
+fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
+    // mill3 X: 150 mm/s, 1500 mm/s², jerk 50 × 1500 = 75000 mm/s³.
+    // At F6000 (100 mm/s) over 100 mm: speeding up takes
+    // dv/A + A/J = 1/15 + 1/50 s and covers half the speed times that time;
+    // slowing down mirrors it; the rest is cruise.
+    let (v, a, j, len) = (100.0f64, 1500.0f64, 75_000.0f64, 100.0f64);
+    let ramp = v / a + a / j;
+    let ramp_distance = v / 2.0 * ramp;
+    let want = 2.0 * ramp + (len - 2.0 * ramp_distance) / v;
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "one.ngc", "G1 X100 F6000\nM2\n");
+    let out = kerf(&["plan", &p, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let got = json["cycle_time_s"].as_f64().unwrap();
+    // Whole servo periods (1 ms) and the executor's J·dt²/8 speed margin
+    // add at most 2 ms.
+    assert!(
+        got >= want - 1e-9 && got <= want + 0.002,
+        "planned {got} s, closed form {want} s"
+    );
+    assert!(json["max_limit_ratio"].as_f64().unwrap() <= 1.0 + 1e-6);
+    // A straight move: any deviation is floating-point rounding.
+    assert!(json["max_deviation_mm"].as_f64().unwrap() < 1e-12);
+    assert_eq!(json["segments"], 1);
+}
+
+#[test]
+fn plan_plot_writes_an_svg() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "sq.ngc", "G1 X10 F3000\nY10\nX0\nY0\nM2\n");
+    let svg = dir.path().join("out.svg");
+    let out = kerf(&["plan", &p, "--plot", svg.to_str().unwrap()]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg") && text.trim_end().ends_with("</svg>"));
+    assert_eq!(text.matches("<polyline").count(), 2 + 3 + 3 + 1);
+    let human = String::from_utf8_lossy(&out.stdout);
+    assert!(human.contains("cycle time") && human.contains("axis X"));
+}
