@@ -118,23 +118,48 @@ impl Arc {
     }
 }
 
-const BINOM5: [f64; 6] = [1.0, 5.0, 10.0, 10.0, 5.0, 1.0];
-
 impl Blend {
     /// The blend of the corner at `corner` between incoming unit direction
     /// `u_in` and outgoing `u_out`, starting `leg` before the corner and
-    /// ending `leg` after it.
+    /// ending `leg` after it, with zero curvature at both ends.
     ///
-    /// Its greatest distance from the corner is `0.375 · leg · |u_out − u_in| / 2`
-    /// · 2 = `0.375 · leg · 2 sin(θ/2)` for a turn of θ (see [`Blend::deviation`]).
+    /// Its greatest distance from the corner is [`Blend::deviation`].
     pub fn corner(corner: &Vec9, u_in: &Vec9, u_out: &Vec9, leg: f64) -> Blend {
+        let zero = [0.0; 9];
+        Blend::hermite(
+            &add(corner, u_in, -leg),
+            u_in,
+            &zero,
+            &add(corner, u_out, leg),
+            u_out,
+            &zero,
+            2.0 * leg,
+        )
+    }
+
+    /// The quintic from `p0` to `p1` with unit tangents `t0`, `t1` and
+    /// curvature vectors `k0`, `k1` (perpendicular to the tangents) at its
+    /// ends: G2 continuity with whatever it joins. `scale` is the length of
+    /// the end derivatives, about the curve's length.
+    pub fn hermite(
+        p0: &Vec9,
+        t0: &Vec9,
+        k0: &Vec9,
+        p1: &Vec9,
+        t1: &Vec9,
+        k1: &Vec9,
+        scale: f64,
+    ) -> Blend {
+        // B′(0) = 5(Q1 − Q0), B″(0) = 20(Q2 − 2Q1 + Q0), and mirrored at 1:
+        // with B′ = scale·t and B″ = scale²·k these give the control points.
+        let l2 = scale * scale;
         let control = [
-            add(corner, u_in, -leg),
-            add(corner, u_in, -0.6 * leg),
-            add(corner, u_in, -0.2 * leg),
-            add(corner, u_out, 0.2 * leg),
-            add(corner, u_out, 0.6 * leg),
-            add(corner, u_out, leg),
+            *p0,
+            std::array::from_fn(|i| p0[i] + scale * t0[i] / 5.0),
+            std::array::from_fn(|i| p0[i] + 2.0 * scale * t0[i] / 5.0 + l2 * k0[i] / 20.0),
+            std::array::from_fn(|i| p1[i] - 2.0 * scale * t1[i] / 5.0 + l2 * k1[i] / 20.0),
+            std::array::from_fn(|i| p1[i] - scale * t1[i] / 5.0),
+            *p1,
         ];
         let mut b = Blend {
             control,
@@ -147,6 +172,48 @@ impl Blend {
         b
     }
 
+    /// |d B / du| (the hodograph's length), cheaper than [`derivatives`].
+    fn speed(&self, u: f64) -> f64 {
+        let q = &self.control;
+        let w = 1.0 - u;
+        let b4 = [
+            w * w * w * w,
+            4.0 * u * w * w * w,
+            6.0 * u * u * w * w,
+            4.0 * u * u * u * w,
+            u * u * u * u,
+        ];
+        (0..3)
+            .map(|i| {
+                (0..5)
+                    .map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i]))
+                    .sum::<f64>()
+                    .powi(2)
+            })
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Point, unit tangent and curvature vector at Bézier parameter `u`.
+    pub fn frame_at_parameter(&self, u: f64) -> Frame {
+        let (p, d1, d2) = self.derivatives(u);
+        let speed = norm(&d1);
+        let t: Vec9 = std::array::from_fn(|i| d1[i] / speed);
+        let along: f64 = (0..9).map(|i| d2[i] * t[i]).sum();
+        Frame {
+            point: p,
+            tangent: t,
+            curvature: std::array::from_fn(|i| (d2[i] - along * t[i]) / (speed * speed)),
+        }
+    }
+
+    /// Arc length from the start to parameter `u`.
+    pub fn length_to(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        let i = ((u * 16.0) as usize).min(15);
+        self.table[i] + self.speed_integral(i as f64 / 16.0, u)
+    }
+
     /// Distance from the corner to the blend's midpoint, which is the blend's
     /// greatest distance from the corner: `(1 + 5·0.6 + 10·0.2)/32 · leg · |u_out − u_in|`.
     pub fn deviation(leg: f64, u_in: &Vec9, u_out: &Vec9) -> f64 {
@@ -154,33 +221,59 @@ impl Blend {
         6.0 / 32.0 * leg * norm(&d)
     }
 
+    /// Point, first and second derivative in the Bézier parameter. Blends
+    /// join XYZ-only lines, so only X Y Z vary; the other axes stay put.
     fn derivatives(&self, u: f64) -> (Vec9, Vec9, Vec9) {
         let q = &self.control;
         let w = 1.0 - u;
-        // Bernstein bases of degree 5, 4 and 3.
-        let b5: [f64; 6] =
-            std::array::from_fn(|k| BINOM5[k] * u.powi(k as i32) * w.powi(5 - k as i32));
-        let b4: [f64; 5] = std::array::from_fn(|k| {
-            [1.0, 4.0, 6.0, 4.0, 1.0][k] * u.powi(k as i32) * w.powi(4 - k as i32)
-        });
-        let b3: [f64; 4] = std::array::from_fn(|k| {
-            [1.0, 3.0, 3.0, 1.0][k] * u.powi(k as i32) * w.powi(3 - k as i32)
-        });
-        let mut p = [0.0; 9];
+        let (u2, w2) = (u * u, w * w);
+        let b5 = [
+            w2 * w2 * w,
+            5.0 * u * w2 * w2,
+            10.0 * u2 * w2 * w,
+            10.0 * u2 * u * w2,
+            5.0 * u2 * u2 * w,
+            u2 * u2 * u,
+        ];
+        let b4 = [
+            w2 * w2,
+            4.0 * u * w2 * w,
+            6.0 * u2 * w2,
+            4.0 * u2 * u * w,
+            u2 * u2,
+        ];
+        let b3 = [w2 * w, 3.0 * u * w2, 3.0 * u2 * w, u2 * u];
+        let mut p = q[0];
         let mut d1 = [0.0; 9];
         let mut d2 = [0.0; 9];
-        for i in 0..9 {
-            for k in 0..6 {
-                p[i] += b5[k] * q[k][i];
-            }
-            for k in 0..5 {
-                d1[i] += 5.0 * b4[k] * (q[k + 1][i] - q[k][i]);
-            }
-            for k in 0..4 {
-                d2[i] += 20.0 * b3[k] * (q[k + 2][i] - 2.0 * q[k + 1][i] + q[k][i]);
-            }
+        for i in 0..3 {
+            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
+            d1[i] = (0..5).map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i])).sum();
+            d2[i] = (0..4)
+                .map(|k| 20.0 * b3[k] * (q[k + 2][i] - 2.0 * q[k + 1][i] + q[k][i]))
+                .sum();
         }
         (p, d1, d2)
+    }
+
+    /// Point at Bézier parameter `u` (X Y Z vary, as in [`derivatives`]).
+    pub fn point_at_parameter(&self, u: f64) -> Vec9 {
+        let q = &self.control;
+        let w = 1.0 - u;
+        let (u2, w2) = (u * u, w * w);
+        let b5 = [
+            w2 * w2 * w,
+            5.0 * u * w2 * w2,
+            10.0 * u2 * w2 * w,
+            10.0 * u2 * u * w2,
+            5.0 * u2 * u2 * w,
+            u2 * u2 * u,
+        ];
+        let mut p = q[0];
+        for i in 0..3 {
+            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
+        }
+        p
     }
 
     /// Arc length between parameters u0 and u1 (5-point Gauss–Legendre).
@@ -213,7 +306,12 @@ impl Blend {
 
     /// The Bézier parameter at arc length `s` (Newton from the table).
     fn parameter(&self, s: f64) -> f64 {
-        let s = s.clamp(0.0, self.length());
+        if s <= 0.0 {
+            return 0.0;
+        }
+        if s >= self.length() {
+            return 1.0;
+        }
         let i = self.table.partition_point(|&t| t <= s).clamp(1, 16) - 1;
         let (s0, s1) = (self.table[i], self.table[i + 1]);
         let u0 = i as f64 / 16.0;
@@ -225,7 +323,7 @@ impl Blend {
             };
         for _ in 0..3 {
             let err = s0 + self.speed_integral(u0, u) - s;
-            let speed = norm(&self.derivatives(u).1);
+            let speed = self.speed(u);
             if speed <= 0.0 {
                 break;
             }
@@ -287,20 +385,8 @@ impl Shape {
                 curvature: [0.0; 9],
             },
             Shape::Arc(a) => self.frame_arc(a, s),
-            Shape::Blend(b) => {
-                let u = b.parameter(s);
-                let (p, d1, d2) = b.derivatives(u);
-                let speed = norm(&d1);
-                let t: Vec9 = std::array::from_fn(|i| d1[i] / speed);
-                // d²p/ds² = (d2 − (d2·t) t) / |d1|²
-                let along: f64 = (0..9).map(|i| d2[i] * t[i]).sum();
-                let k: Vec9 = std::array::from_fn(|i| (d2[i] - along * t[i]) / (speed * speed));
-                Frame {
-                    point: p,
-                    tangent: t,
-                    curvature: k,
-                }
-            }
+            // d²p/ds² = (d2 − (d2·t) t) / |d1|² in the Bézier parameter.
+            Shape::Blend(b) => b.frame_at_parameter(b.parameter(s)),
         }
     }
 

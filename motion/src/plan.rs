@@ -134,14 +134,26 @@ impl Default for PlannerConfig {
     }
 }
 
-/// A line waiting for its successor, which decides its end blend.
+/// A move waiting for its successors, which decide its end.
 #[derive(Clone, Copy, Debug)]
-struct Held {
+struct Pending {
     segment: Segment,
-    /// The segment's line, when it is one (lines can be trimmed for blends).
+    /// The line as programmed (before blends trimmed it), when it is one.
+    programmed: Option<Line>,
+    /// The line as trimmed so far.
     line: Option<Line>,
-    /// Length before any trimming: blends take at most half of it at each end.
-    full_length: f64,
+    /// Path mode in force when the move was programmed.
+    mode: PathMode,
+    /// Length of the start taken by the blend before it.
+    start_leg: f64,
+    /// Curvature chosen at the midpoint when blends take the whole line.
+    mid_curvature: Vec9,
+}
+
+impl Pending {
+    fn full_length(&self) -> f64 {
+        self.programmed.map_or(self.segment.length, |l| l.length())
+    }
 }
 
 /// Turns canon into segments for one machine.
@@ -156,12 +168,25 @@ pub struct Planner<'k> {
     /// Programmed feed, mm/s.
     feed: f64,
     position: Position,
-    held: Option<Held>,
+    pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
 }
 
 /// Directions closer than this (|u1 − u2|) are one straight line.
 const STRAIGHT: f64 = 1e-9;
+
+/// Distance from `p` to the segment a–b.
+fn distance_to_line(p: &Vec9, l: &Line) -> f64 {
+    let d: Vec9 = std::array::from_fn(|i| l.end[i] - l.start[i]);
+    let w: Vec9 = std::array::from_fn(|i| p[i] - l.start[i]);
+    let dd: f64 = d.iter().map(|x| x * x).sum();
+    let t = if dd > 0.0 {
+        ((0..9).map(|i| w[i] * d[i]).sum::<f64>() / dd).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    norm(&std::array::from_fn(|i| w[i] - t * d[i]))
+}
 
 impl<'k> Planner<'k> {
     /// A planner for the machine `kins`, starting at `start`.
@@ -172,11 +197,8 @@ impl<'k> Planner<'k> {
         }
         let mut sample_joints = false;
         for (j, spec) in kins.joints().iter().enumerate() {
-            match kins
-                .joint_axis(j)
-                .and_then(|a| limits[a.index()].as_mut().map(|l| (a, l)))
-            {
-                Some((_, l)) => {
+            match kins.joint_axis(j).and_then(|a| limits[a.index()].as_mut()) {
+                Some(l) => {
                     l.max_velocity = l.max_velocity.min(spec.limits.max_velocity);
                     l.max_acceleration = l.max_acceleration.min(spec.limits.max_acceleration);
                     l.max_jerk = l.max_jerk.min(spec.limits.max_jerk);
@@ -197,7 +219,7 @@ impl<'k> Planner<'k> {
             mode: config.mode,
             feed: 0.0,
             position: start,
-            held: None,
+            pending: VecDeque::new(),
             ready: VecDeque::new(),
         }
     }
@@ -212,21 +234,24 @@ impl<'k> Planner<'k> {
         self.mode = mode;
     }
 
-    /// The next segment whose successor is known, if any.
+    /// The next segment whose successors are known, if any.
     pub fn next_segment(&mut self) -> Option<Segment> {
         self.ready.pop_front()
     }
 
-    /// Release the last held move, ending at rest (program end).
+    /// Release every waiting move, the last ending at rest (program end,
+    /// dwell, or anything else that stops the machine).
     pub fn finish(&mut self) {
-        self.release_held(0.0);
+        self.drain(true);
     }
 
     /// Plan one canon command. Segments become available from
-    /// [`next_segment`](Self::next_segment) once their successor is known.
+    /// [`next_segment`](Self::next_segment) once their successors are known.
     ///
     /// Errors, naming the source line, if the move leaves the machine's
     /// travel, reach or joint strokes, or moves an axis the machine lacks.
+    /// After an error the planner carries on from the move's end, so a
+    /// check can report every violation of a program.
     pub fn plan(&mut self, canon: &Canon) -> Result<(), PlanError> {
         let line = canon.source.line;
         match &canon.cmd {
@@ -310,119 +335,260 @@ impl<'k> Planner<'k> {
             end: end.to_array(),
         };
         let shape = Shape::Line(line);
-        self.check_shape(canon, &shape)?;
         self.position = end;
-        let length = line.length();
-        if length == 0.0 {
+        self.check_shape(canon, &shape)?;
+        if line.length() == 0.0 {
             return Ok(());
         }
         if kind == SegmentKind::Feed && self.feed <= 0.0 {
             return Err(self.error(canon, "feed move with a zero feed rate".into()));
         }
         let segment = self.segment(kind, canon.source.line, shape);
-        let incoming = Held {
+        self.pending.push_back(Pending {
             segment,
+            programmed: Some(line),
             line: Some(line),
-            full_length: length,
-        };
-        match self.held.take() {
-            Some(prev) if prev.line.is_some() => self.join_lines(prev, incoming),
-            prev => {
-                self.held = prev;
-                self.join(incoming);
-            }
-        }
+            mode: self.mode,
+            start_leg: 0.0,
+            mid_curvature: [0.0; 9],
+        });
+        self.drain(false);
         Ok(())
     }
 
-    /// Join two consecutive lines: straight through, blended, or a stop.
-    fn join_lines(&mut self, prev: Held, next: Held) {
-        let (Some(prev_line), Some(next_line)) = (prev.line, next.line) else {
-            self.held = Some(prev);
-            return self.join(next);
-        };
-        if self.mode == PathMode::ExactStop {
-            self.held = Some(prev);
-            self.release_held(0.0);
-            self.held = Some(next);
-            return;
+    /// Plan an arc or helix (from the interpreter's arc commands).
+    pub fn arc(&mut self, canon: &Canon, arc: Arc) -> Result<(), PlanError> {
+        let shape = Shape::Arc(arc);
+        self.position = Position::from_array(shape.end());
+        self.check_shape(canon, &shape)?;
+        if self.feed <= 0.0 {
+            return Err(self.error(canon, "arc with a zero feed rate".into()));
         }
-        let (u1, u2) = (prev_line.direction(), next_line.direction());
-        let turn: Vec9 = std::array::from_fn(|i| u2[i] - u1[i]);
-        let bend = norm(&turn);
-        let xyz_only = |l: &Line| (3..9).all(|i| l.start[i] == l.end[i]);
-        let mut prev = prev;
-        let mut next = next;
-        if bend < STRAIGHT {
-            self.held = Some(prev);
-            self.release_held(f64::INFINITY);
-            self.held = Some(next);
-            return;
-        }
-        let tolerance = match self.mode {
-            PathMode::Blend { tolerance }
-                if xyz_only(&prev_line) && xyz_only(&next_line) && bend < 2.0 - 1e-9 =>
-            {
-                tolerance
-            }
-            _ => {
-                // A corner on an exact path, or one we do not blend: stop there.
-                self.held = Some(prev);
-                self.release_held(0.0);
-                self.held = Some(next);
-                return;
-            }
-        };
-        let prev_len = prev_line.length();
-        let leg = (tolerance * 32.0 / (6.0 * bend))
-            .min(prev_len)
-            .min(prev.full_length / 2.0)
-            .min(next.full_length / 2.0);
-        if leg < 1e-9 {
-            self.held = Some(prev);
-            self.release_held(0.0);
-            self.held = Some(next);
-            return;
-        }
-        let corner = prev_line.end;
-        let mut prev_line = prev_line;
-        let mut next_line = next_line;
-        prev_line.end = std::array::from_fn(|i| corner[i] - leg * u1[i]);
-        next_line.start = std::array::from_fn(|i| corner[i] + leg * u2[i]);
-        prev.line = Some(prev_line);
-        next.line = Some(next_line);
-        let blend_kind =
-            if prev.segment.kind == SegmentKind::Rapid && next.segment.kind == SegmentKind::Rapid {
-                SegmentKind::Rapid
-            } else {
-                SegmentKind::Feed
-            };
-        let mut blend = self.segment(
-            blend_kind,
-            next.segment.line,
-            Shape::Blend(Blend::corner(&corner, &u1, &u2, leg)),
-        );
-        blend.feed = prev.segment.feed.min(next.segment.feed);
-        prev.segment.shape = Shape::Line(prev_line);
-        prev.segment.length = prev_line.length();
-        next.segment.shape = Shape::Line(next_line);
-        next.segment.length = next_line.length();
-        // Lines and blend meet with equal tangents and zero curvature on
-        // both sides, so the junction needs no extra cap.
-        self.held = Some(prev);
-        self.release_held(f64::INFINITY);
-        blend.exit_velocity = blend.max_velocity.min(next.segment.max_velocity);
-        self.ready.push_back(blend);
-        self.held = Some(next);
+        let segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
+        self.pending.push_back(Pending {
+            segment,
+            programmed: None,
+            line: None,
+            mode: self.mode,
+            start_leg: 0.0,
+            mid_curvature: [0.0; 9],
+        });
+        self.drain(false);
+        Ok(())
     }
 
-    /// Emit the held line with a junction cap of `exit` mm/s.
-    fn release_held(&mut self, exit: f64) {
-        if let Some(mut h) = self.held.take() {
-            if h.segment.length > 0.0 {
-                h.segment.exit_velocity = h.segment.max_velocity.min(exit);
-                self.ready.push_back(h.segment);
+    /// The blend legs at the vertex between lines `a` and `b`: how much of
+    /// `a`'s end and of `b`'s start the blend replaces (None: no blend).
+    /// Each leg is the tolerance's leg or half its line, whichever is less,
+    /// so on dense paths blends meet at line midpoints.
+    fn legs(&self, a: &Pending, b: &Pending) -> Option<(f64, f64)> {
+        let (Some(la), Some(lb)) = (a.programmed, b.programmed) else {
+            return None;
+        };
+        let PathMode::Blend { tolerance } = b.mode else {
+            return None;
+        };
+        let xyz_only = |l: &Line| (3..9).all(|i| l.start[i] == l.end[i]);
+        let (u1, u2) = (la.direction(), lb.direction());
+        let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
+        if !(STRAIGHT..=2.0 - 1e-9).contains(&bend) || !xyz_only(&la) || !xyz_only(&lb) {
+            return None;
+        }
+        // Closed-form leg of a symmetric blend with zero end curvature.
+        let leg = tolerance * 32.0 / (6.0 * bend);
+        let legs = (leg.min(la.length() / 2.0), leg.min(lb.length() / 2.0));
+        (legs.0.min(legs.1) >= 1e-9).then_some(legs)
+    }
+
+    /// Curvature the path should have at the midpoint of `b`, a line whose
+    /// two blends meet there: the mean of the discrete curvatures at its two
+    /// vertices (exactly 1/R on a polygon inscribed in a circle of radius R).
+    fn mid_curvature(a: &Line, b: &Line, c: &Line) -> Vec9 {
+        let (ta, tb, tc) = (a.direction(), b.direction(), c.direction());
+        let (la, lb, lc) = (a.length(), b.length(), c.length());
+        let mut k: Vec9 = std::array::from_fn(|i| {
+            ((tb[i] - ta[i]) / ((la + lb) / 2.0) + (tc[i] - tb[i]) / ((lb + lc) / 2.0)) / 2.0
+        });
+        let along: f64 = (0..9).map(|i| k[i] * tb[i]).sum();
+        for i in 0..9 {
+            k[i] -= along * tb[i];
+        }
+        k
+    }
+
+    /// The blend at the vertex of `a` and `b` with legs `legs` and end
+    /// curvatures `k0`, `k1`, if it stays within `b`'s tolerance of the
+    /// programmed lines (checked on 33 points).
+    fn blend_within(
+        a: &Pending,
+        b: &Pending,
+        legs: (f64, f64),
+        k0: &Vec9,
+        k1: &Vec9,
+    ) -> Option<Blend> {
+        let (la, lb) = (a.programmed?, b.programmed?);
+        let PathMode::Blend { tolerance } = b.mode else {
+            return None;
+        };
+        let (u1, u2) = (la.direction(), lb.direction());
+        let corner = la.end;
+        let blend = Blend::hermite(
+            &std::array::from_fn(|i| corner[i] - legs.0 * u1[i]),
+            &u1,
+            k0,
+            &std::array::from_fn(|i| corner[i] + legs.1 * u2[i]),
+            &u2,
+            k1,
+            legs.0 + legs.1,
+        );
+        let within = (1..32).all(|k| {
+            let p = blend.point_at_parameter(k as f64 / 32.0);
+            distance_to_line(&p, &la).min(distance_to_line(&p, &lb)) <= tolerance
+        });
+        within.then_some(blend)
+    }
+
+    /// Emit what the waiting moves decide. With `last`, everything goes and
+    /// the final move ends at rest.
+    fn drain(&mut self, last: bool) {
+        let zero = [0.0; 9];
+        loop {
+            let n = self.pending.len();
+            if n == 0 {
+                return;
             }
+            if n == 1 {
+                if last {
+                    let a = self.pending.pop_front().expect("one waiting");
+                    self.emit(a.segment, 0.0);
+                }
+                return;
+            }
+            let both_lines = self.pending[0].line.is_some() && self.pending[1].line.is_some();
+            if both_lines && n < 3 && !last {
+                return; // the midpoint of pending[1] depends on the next move
+            }
+            let a = self.pending[0];
+            let b = self.pending[1];
+            let Some(mut legs) = (if both_lines { self.legs(&a, &b) } else { None }) else {
+                let exit = self.junction(&a, &b);
+                self.pending.pop_front();
+                self.emit(a.segment, exit);
+                continue;
+            };
+            let c = self.pending.get(2).copied().filter(|c| c.line.is_some());
+            let legs_bc = c.and_then(|c| self.legs(&b, &c));
+            let half = |p: &Pending| p.full_length() / 2.0;
+            // A line is consumed when blends take both its halves; the
+            // curvature chosen at its midpoint is shared by both blends.
+            let a_consumed = a.start_leg == half(&a) && legs.0 == half(&a);
+            let k0 = if a_consumed { a.mid_curvature } else { zero };
+            let b_consumed = legs.1 == half(&b) && legs_bc.is_some_and(|l| l.0 == half(&b));
+            let mut k1 = zero;
+            let mut blend = None;
+            if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
+                let candidate = Self::mid_curvature(
+                    &a.programmed.unwrap(),
+                    &b.programmed.unwrap(),
+                    &c.programmed.unwrap(),
+                );
+                if let Some(bl) = Self::blend_within(&a, &b, legs, &k0, &candidate) {
+                    if Self::blend_within(&b, &c, legs_bc, &candidate, &zero).is_some() {
+                        k1 = candidate;
+                        blend = Some(bl);
+                    }
+                }
+            }
+            let blend = match blend {
+                Some(bl) => bl,
+                None => {
+                    // Zero curvature at b's end. With k0 fixed the legs are
+                    // too (a's midpoint is shared); otherwise shrink them
+                    // until the blend is within tolerance.
+                    let mut found = Self::blend_within(&a, &b, legs, &k0, &zero);
+                    if !a_consumed {
+                        for _ in 0..8 {
+                            if found.is_some() {
+                                break;
+                            }
+                            legs = (legs.0 * 0.7, legs.1 * 0.7);
+                            found = Self::blend_within(&a, &b, legs, &zero, &zero);
+                        }
+                    }
+                    match found {
+                        Some(bl) => bl,
+                        None => {
+                            // No blend fits: stop at the corner.
+                            let exit = self.junction(&a, &b);
+                            self.pending.pop_front();
+                            self.emit(a.segment, exit);
+                            continue;
+                        }
+                    }
+                }
+            };
+            let corner = a.programmed.unwrap().end;
+            let (u1, u2) = (
+                a.programmed.unwrap().direction(),
+                b.programmed.unwrap().direction(),
+            );
+            let mut a = self.pending.pop_front().expect("two waiting");
+            let mut trimmed = a.line.expect("a line");
+            trimmed.end = std::array::from_fn(|i| corner[i] - legs.0 * u1[i]);
+            a.segment.shape = Shape::Line(trimmed);
+            a.segment.length = trimmed.length();
+            let b = self.pending.front_mut().expect("b waits");
+            let mut b_line = b.line.expect("a line");
+            b_line.start = std::array::from_fn(|i| corner[i] + legs.1 * u2[i]);
+            b.line = Some(b_line);
+            b.segment.shape = Shape::Line(b_line);
+            b.segment.length = b_line.length();
+            b.start_leg = legs.1;
+            b.mid_curvature = k1;
+            let b_segment = b.segment;
+            let kind =
+                if a.segment.kind == SegmentKind::Rapid && b_segment.kind == SegmentKind::Rapid {
+                    SegmentKind::Rapid
+                } else {
+                    SegmentKind::Feed
+                };
+            let mut blend = self.segment(kind, b_segment.line, Shape::Blend(blend));
+            blend.feed = a.segment.feed.min(b_segment.feed);
+            // Equal tangents and curvatures meet at both ends of the blend;
+            // a consumed line leaves nothing (or rounding) between blends.
+            if a.segment.length > 1e-9 * a.full_length().max(1.0) {
+                self.emit(a.segment, f64::INFINITY);
+            }
+            self.emit(blend, f64::INFINITY);
+        }
+    }
+
+    /// Speed cap where `a` meets `b` without a blend: straight or tangent
+    /// junctions go through at the speed that keeps the curvature jump
+    /// within the jerk limit over one period; corners stop.
+    fn junction(&self, a: &Pending, b: &Pending) -> f64 {
+        if b.mode == PathMode::ExactStop {
+            return 0.0;
+        }
+        let end = a.segment.shape.frame(a.segment.length);
+        let start = b.segment.shape.frame(0.0);
+        let bend = norm(&std::array::from_fn(|i| start.tangent[i] - end.tangent[i]));
+        let limit = if a.line.is_some() && b.line.is_some() {
+            STRAIGHT
+        } else {
+            1e-6
+        };
+        if bend > limit {
+            return 0.0;
+        }
+        let jump: Vec9 = std::array::from_fn(|i| start.curvature[i] - end.curvature[i]);
+        self.curvature_jump_cap(&jump)
+    }
+
+    fn emit(&mut self, mut segment: Segment, exit: f64) {
+        if segment.length > 0.0 {
+            segment.exit_velocity = segment.max_velocity.min(exit);
+            self.ready.push_back(segment);
         }
     }
 
@@ -457,33 +623,58 @@ impl<'k> Planner<'k> {
     /// sum by the limit.
     fn path_limits(&self, shape: &Shape, length: f64) -> (f64, f64, f64) {
         let (mut v, mut a, mut j) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
-        let samples: usize = match shape {
-            Shape::Line(_) => 1,
-            Shape::Arc(_) => 3,
-            Shape::Blend(_) => 9,
-        };
         // Largest |t_i|, |κ_i| and |dκ_i/ds| over the shape.
         let mut t_max = [0.0f64; 9];
         let mut k_max = [0.0f64; 9];
         let mut dk_max = [0.0f64; 9];
-        for k in 0..samples {
-            let s = if samples == 1 {
-                0.0
-            } else {
-                length * k as f64 / (samples - 1) as f64
-            };
-            let f = shape.frame(s);
-            let h = (length * 1e-4).max(1e-9);
-            let (fa, fb) = (
-                shape.frame((s - h).max(0.0)),
-                shape.frame((s + h).min(length)),
-            );
-            let span = (s + h).min(length) - (s - h).max(0.0);
-            for i in 0..9 {
-                t_max[i] = t_max[i].max(f.tangent[i].abs());
-                k_max[i] = k_max[i].max(f.curvature[i].abs());
-                if span > 0.0 && !matches!(shape, Shape::Line(_)) {
-                    dk_max[i] = dk_max[i].max(((fb.curvature[i] - fa.curvature[i]) / span).abs());
+        match shape {
+            Shape::Line(l) => {
+                let t = l.direction();
+                for i in 0..9 {
+                    t_max[i] = t[i].abs();
+                }
+            }
+            Shape::Arc(arc) => {
+                // Constant curvature r·w² and its rate r·|w|³ (w = dθ/ds).
+                let f = shape.frame(0.0);
+                let w = if length > 0.0 {
+                    arc.sweep.abs() / length
+                } else {
+                    0.0
+                };
+                for i in 0..9 {
+                    t_max[i] = if i == arc.plane.0 || i == arc.plane.1 {
+                        arc.radius * w
+                    } else {
+                        f.tangent[i].abs()
+                    };
+                    if i == arc.plane.0 || i == arc.plane.1 {
+                        k_max[i] = arc.radius * w * w;
+                        dk_max[i] = arc.radius * w * w * w;
+                    }
+                }
+            }
+            Shape::Blend(b) => {
+                // Sample at the arc-length table's nodes; dκ/ds by differences.
+                const N: usize = 16;
+                let frames: [crate::path::Frame; N + 1] =
+                    std::array::from_fn(|k| b.frame_at_parameter(k as f64 / N as f64));
+                for k in 0..=N {
+                    let f = &frames[k];
+                    for i in 0..3 {
+                        t_max[i] = t_max[i].max(f.tangent[i].abs());
+                        k_max[i] = k_max[i].max(f.curvature[i].abs());
+                    }
+                    if k < N {
+                        let ds = b.table[k + 1] - b.table[k];
+                        if ds > 0.0 {
+                            for i in 0..3 {
+                                let g = &frames[k + 1];
+                                dk_max[i] =
+                                    dk_max[i].max(((g.curvature[i] - f.curvature[i]) / ds).abs());
+                            }
+                        }
+                    }
                 }
             }
         }
@@ -512,34 +703,32 @@ impl<'k> Planner<'k> {
             }
         }
         if self.sample_joints {
-            let (jv, ja) = self.joint_limits(shape, length);
-            v = v.min(jv);
-            a = a.min(ja.0);
-            v = v.min(ja.1);
+            let (jv, ja, jv_curv) = self.joint_limits(shape, length);
+            v = v.min(jv).min(jv_curv);
+            a = a.min(ja);
         }
         (v, a, j)
     }
 
     /// Joint velocity and acceleration limits on path speed and
     /// acceleration, from dq/ds and d²q/ds² sampled through the
-    /// kinematics. Returns (v_max, (a_max, v_max from curvature)).
-    fn joint_limits(&self, shape: &Shape, length: f64) -> (f64, (f64, f64)) {
+    /// kinematics: joint speed is dq/ds·v and joint acceleration
+    /// dq/ds·a + d²q/ds²·v², whose budget is split half and half.
+    /// Returns (v_max, a_max, v_max from d²q/ds²).
+    fn joint_limits(&self, shape: &Shape, length: f64) -> (f64, f64, f64) {
         let joints = self.kins.joints();
         let n = joints.len();
         let samples = ((length / 2.0).ceil() as usize).clamp(3, 64);
         let h = (length / samples as f64 / 4.0).clamp(1e-6, 0.5);
-        let mut v = f64::INFINITY;
-        let mut a = f64::INFINITY;
-        let mut v_curv = f64::INFINITY;
-        let mut seed = Position::from_array(shape.start());
+        let (mut v, mut a, mut v_curv) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         for k in 0..=samples {
             let s = length * k as f64 / samples as f64;
             let (s0, s1) = ((s - h).max(0.0), (s + h).min(length));
             let mut q = [[0.0; MAX_JOINTS]; 3];
             let ok = [s0, s, s1].iter().enumerate().all(|(m, &si)| {
-                let p = Position::from_array(shape.point(si));
-                seed = p;
-                self.kins.inverse(&p, &mut q[m][..n]).is_ok()
+                self.kins
+                    .inverse(&Position::from_array(shape.point(si)), &mut q[m][..n])
+                    .is_ok()
             });
             if !ok || s1 - s0 <= 0.0 {
                 continue;
@@ -558,49 +747,7 @@ impl<'k> Planner<'k> {
                 }
             }
         }
-        let _ = seed;
-        (v, (a, v_curv))
-    }
-
-    /// Plan an arc (used once the interpreter produces arcs).
-    pub fn arc(&mut self, canon: &Canon, arc: Arc) -> Result<(), PlanError> {
-        let shape = Shape::Arc(arc);
-        self.check_shape(canon, &shape)?;
-        if self.feed <= 0.0 {
-            return Err(self.error(canon, "arc with a zero feed rate".into()));
-        }
-        let segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
-        self.position = Position::from_array(shape.end());
-        let full_length = segment.length;
-        self.join(Held {
-            segment,
-            line: None,
-            full_length,
-        });
-        Ok(())
-    }
-
-    /// Join `next` after whatever is held when no blend applies: straight
-    /// through a tangent junction at a speed that keeps the curvature jump
-    /// within the jerk limit over one period, or a stop at a corner.
-    fn join(&mut self, next: Held) {
-        let exit = match self.held.as_ref() {
-            None => 0.0,
-            Some(_) if self.mode == PathMode::ExactStop => 0.0,
-            Some(prev) => {
-                let end = prev.segment.shape.frame(prev.segment.length);
-                let start = next.segment.shape.frame(0.0);
-                let bend: Vec9 = std::array::from_fn(|i| start.tangent[i] - end.tangent[i]);
-                if norm(&bend) > 1e-6 {
-                    0.0
-                } else {
-                    let jump: Vec9 = std::array::from_fn(|i| start.curvature[i] - end.curvature[i]);
-                    self.curvature_jump_cap(&jump)
-                }
-            }
-        };
-        self.release_held(exit);
-        self.held = Some(next);
+        (v, a, v_curv)
     }
 
     fn curvature_jump_cap(&self, jump: &Vec9) -> f64 {
