@@ -6,17 +6,30 @@
 //! binary; [`load`] takes an embedded name or a path to a TOML file.
 
 pub mod description;
+pub mod oxglide;
+pub mod rfmt5;
 pub mod trivial;
+pub mod workspace;
 
 use std::path::Path;
 use std::sync::Arc;
 
+use kerf_interp::Position;
+use kerf_motion::kinematics::{AxisSpec, KinematicsError};
 use kerf_motion::Kinematics;
 
 pub use description::{Description, MachineError};
 
 /// Machine descriptions embedded in the binary, by name.
-pub const EMBEDDED: &[(&str, &str)] = &[("mill3", include_str!("../mill3.toml"))];
+pub const EMBEDDED: &[(&str, &str)] = &[
+    ("mill3", include_str!("../mill3.toml")),
+    ("oxglide-x", include_str!("../oxglide-x.toml")),
+    ("oxglide-o", include_str!("../oxglide-o.toml")),
+    ("rfmt5", include_str!("../rfmt5.toml")),
+];
+
+/// The kinematics modules a description may name in `kinematics`.
+pub const KINEMATICS: &[&str] = &["trivial", "oxglide-x", "oxglide-o", "rfmt5"];
 
 /// The name of the machine kerfd runs when no configuration names one.
 pub const DEFAULT_MACHINE: &str = "mill3";
@@ -29,6 +42,14 @@ pub struct Machine {
     pub origin: String,
 }
 
+impl Machine {
+    /// The pose the machine starts at (the description's `[home]`), which
+    /// [`from_toml`] has checked to be inside the travel and reachable.
+    pub fn home(&self) -> kerf_interp::Position {
+        self.description.home()
+    }
+}
+
 impl std::fmt::Debug for Machine {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Machine")
@@ -36,6 +57,48 @@ impl std::fmt::Debug for Machine {
             .field("kinematics", &self.kinematics.name())
             .field("origin", &self.origin)
             .finish()
+    }
+}
+
+/// Refuse a joint slice of the wrong length or with a value that is not a
+/// finite number: shared entry check of every module's `forward`.
+pub(crate) fn check_joint_input(joints: &[f64], expected: usize) -> Result<(), KinematicsError> {
+    if joints.len() != expected {
+        return Err(KinematicsError::JointCount {
+            expected,
+            got: joints.len(),
+        });
+    }
+    if joints.iter().all(|q| q.is_finite()) {
+        Ok(())
+    } else {
+        Err(KinematicsError::Unreachable {
+            reason: "a joint position is not a finite number",
+        })
+    }
+}
+
+/// Refuse a joint slice of the wrong length, or a pose with a coordinate on
+/// one of `axes` that is not a finite number: shared entry check of every
+/// module's `inverse`.
+pub(crate) fn check_pose_input(
+    pose: &Position,
+    axes: &[AxisSpec],
+    joints: usize,
+    expected: usize,
+) -> Result<(), KinematicsError> {
+    if joints != expected {
+        return Err(KinematicsError::JointCount {
+            expected,
+            got: joints,
+        });
+    }
+    if axes.iter().all(|a| pose.get(a.axis).is_finite()) {
+        Ok(())
+    } else {
+        Err(KinematicsError::Unreachable {
+            reason: "a coordinate of the pose is not a finite number",
+        })
     }
 }
 
@@ -66,18 +129,46 @@ pub fn load(spec: &str) -> Result<Machine, MachineError> {
 }
 
 /// Build a machine from description text; `origin` names it in errors.
+///
+/// Besides the description's own checks, the home pose must lie inside the
+/// travel and be reachable with every joint inside its stroke.
 pub fn from_toml(text: &str, origin: &str) -> Result<Machine, MachineError> {
     let description = Description::parse(text, origin)?;
-    let kinematics: Arc<dyn Kinematics> = match description.kinematics.as_str() {
-        "trivial" => Arc::new(trivial::Trivial::from_description(&description, origin)?),
+    let d = &description;
+    let kinematics: Arc<dyn Kinematics> = match d.kinematics.as_str() {
+        "trivial" => Arc::new(trivial::Trivial::from_description(d, origin)?),
+        "oxglide-x" => Arc::new(oxglide::OxGlide::from_description(
+            oxglide::Form::Crossed,
+            d,
+            origin,
+        )?),
+        "oxglide-o" => Arc::new(oxglide::OxGlide::from_description(
+            oxglide::Form::Extended,
+            d,
+            origin,
+        )?),
+        "rfmt5" => Arc::new(rfmt5::Rfmt5::from_description(d, origin)?),
         other => {
             return Err(MachineError::Key {
                 origin: origin.to_string(),
                 key: "kinematics".into(),
-                reason: format!("unknown kinematics {other:?}; known: trivial"),
+                reason: format!(
+                    "unknown kinematics {other:?}; known: {}",
+                    KINEMATICS.join(", ")
+                ),
             })
         }
     };
+    kinematics
+        .check_pose(&d.home())
+        .map_err(|e| MachineError::Key {
+            origin: origin.to_string(),
+            key: "home".into(),
+            reason: format!(
+                "the machine cannot start there: {}",
+                e.describe(&*kinematics)
+            ),
+        })?;
     Ok(Machine {
         description,
         kinematics,
