@@ -211,6 +211,76 @@ mod tests {
         assert!(e.contains("nosuch") && e.contains("mill3"), "{e}");
     }
 
+    fn embedded(name: &str) -> &'static str {
+        EMBEDDED.iter().find(|(n, _)| *n == name).unwrap().1
+    }
+
+    #[test]
+    fn every_embedded_machine_loads_and_starts_at_home() {
+        for (name, _) in EMBEDDED {
+            let m = load(name).unwrap();
+            assert_eq!(m.description.name, *name);
+            m.kinematics.check_pose(&m.home()).unwrap();
+        }
+        assert_eq!(load("mill3").unwrap().home(), kerf_interp::Position::ZERO);
+        let ox = load("oxglide-x").unwrap().home();
+        assert_eq!((ox.x, ox.y, ox.z), (250.0, 0.0, -300.0));
+    }
+
+    #[test]
+    fn dimension_errors_name_the_key() {
+        let text = embedded("oxglide-x");
+        let typo = text.replacen("l2 = 432.0", "l3 = 432.0", 1);
+        assert_eq!(
+            from_toml(&typo, "ox.toml").unwrap_err().to_string(),
+            "ox.toml: key `dimensions.l3`: not a dimension of oxglide-x kinematics \
+             (it has l1, l2, p1, p2, d)"
+        );
+        let missing = text.replacen("d = 74.0\n", "", 1);
+        assert_eq!(
+            from_toml(&missing, "ox.toml").unwrap_err().to_string(),
+            "ox.toml: key `dimensions.d`: missing: oxglide-x kinematics needs it"
+        );
+        let negative = embedded("rfmt5").replacen("rod_length = 250.0", "rod_length = -250.0", 1);
+        assert_eq!(
+            from_toml(&negative, "r.toml").unwrap_err().to_string(),
+            "r.toml: key `dimensions.rod_length`: must be greater than zero, got -250"
+        );
+    }
+
+    #[test]
+    fn layout_and_home_errors_name_the_key() {
+        let text = embedded("oxglide-x");
+        let two_joints = text.replacen("[[joints]]\nname = \"s3\"", "[extra]\nname = \"s3\"", 1);
+        let e = from_toml(&two_joints, "ox.toml").unwrap_err().to_string();
+        assert!(e.starts_with("ox.toml: "), "{e}");
+        let unknown_kins = text.replacen("kinematics = \"oxglide-x\"", "kinematics = \"scara\"", 1);
+        let e = from_toml(&unknown_kins, "ox.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("`kinematics`") && e.contains("scara") && e.contains("rfmt5"),
+            "{e}"
+        );
+        let no_a = embedded("rfmt5")
+            .replacen("[axes.a]", "[axes.c]", 1)
+            .replacen("a = 0.0\n", "", 1);
+        let e = from_toml(&no_a, "r.toml").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "r.toml: key `axes`: rfmt5 kinematics needs exactly the axes x y z a b, found x y z b c"
+        );
+        // The origin, where kerfd used to start every machine, is out of
+        // the O-X glide's reach.
+        let at_origin = text.replacen("z = -300.0", "z = 0.0", 1);
+        let e = from_toml(&at_origin, "ox.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with("ox.toml: key `home`: the machine cannot start there: "),
+            "{e}"
+        );
+        let bad_axis = text.replacen("y = 0.0\nz = -300.0", "y = 0.0\nz = -300.0\na = 1.0", 1);
+        let e = from_toml(&bad_axis, "ox.toml").unwrap_err().to_string();
+        assert_eq!(e, "ox.toml: key `home.a`: not one of this machine's [axes]");
+    }
+
     #[test]
     fn missing_file_names_the_path() {
         let e = load("/nonexistent/m.toml").unwrap_err().to_string();
