@@ -111,16 +111,19 @@ pub struct Rfmt5 {
     joints: Vec<JointSpec>,
 }
 
-/// R_y(b)·R_x(a) and its derivatives with respect to a and b.
-fn rotation(a: f64, b: f64) -> (Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
-    let (sa, ca) = a.sin_cos();
-    let (sb, cb) = b.sin_cos();
+/// R_y(b)·R_x(a), as sines and cosines of a and b.
+fn rotation(sa: f64, ca: f64, sb: f64, cb: f64) -> Matrix3<f64> {
     #[rustfmt::skip]
     let r = Matrix3::new(
         cb,  sb * sa, sb * ca,
         0.0, ca,      -sa,
         -sb, cb * sa, cb * ca,
     );
+    r
+}
+
+/// ∂R/∂a and ∂R/∂b of [`rotation`].
+fn rotation_derivatives(sa: f64, ca: f64, sb: f64, cb: f64) -> (Matrix3<f64>, Matrix3<f64>) {
     #[rustfmt::skip]
     let dr_da = Matrix3::new(
         0.0, sb * ca,  -sb * sa,
@@ -133,7 +136,7 @@ fn rotation(a: f64, b: f64) -> (Matrix3<f64>, Matrix3<f64>, Matrix3<f64>) {
         0.0, 0.0,      0.0,
         -cb, -sb * sa, -sb * ca,
     );
-    (r, dr_da, dr_db)
+    (dr_da, dr_db)
 }
 
 impl Rfmt5 {
@@ -182,11 +185,21 @@ impl Rfmt5 {
         self.dims
     }
 
-    /// Slider extensions l1..l3 for the platform at centre height `zc` (mm)
-    /// and tilt `a`, `b` (radians), with ∂l/∂(zc, a, b) row by row.
-    fn legs(&self, v: &Vector3<f64>) -> Result<(Vector3<f64>, Matrix3<f64>), KinematicsError> {
+    /// Slider extensions l1..l3 for the platform v = (centre height Zc mm,
+    /// tilt a, b radians); with `jacobian`, also ∂l/∂(Zc, a, b) row by row
+    /// (forward kinematics need it, inverse kinematics do not).
+    fn legs(
+        &self,
+        v: &Vector3<f64>,
+        jacobian: Option<&mut Matrix3<f64>>,
+    ) -> Result<Vector3<f64>, KinematicsError> {
         let (zc, a, b) = (v[0], v[1], v[2]);
-        let (r, dr_da, dr_db) = rotation(a, b);
+        let (sa, ca) = a.sin_cos();
+        let (sb, cb) = b.sin_cos();
+        let r = rotation(sa, ca, sb, cb);
+        let derivatives = jacobian
+            .is_some()
+            .then(|| rotation_derivatives(sa, ca, sb, cb));
         let rod = self.dims.rod_length;
         let mut legs = Vector3::zeros();
         let mut jac = Matrix3::zeros();
@@ -208,14 +221,19 @@ impl Rfmt5 {
                 });
             }
             legs[i] = self.dims.base_height - (zc + u.z) - w;
-            // ∂l/∂q = −∂Uz/∂q + (dx ∂Ux/∂q + dy ∂Uy/∂q) / w
-            let du_da = dr_da * p;
-            let du_db = dr_db * p;
-            jac[(i, 0)] = -1.0;
-            jac[(i, 1)] = -du_da.z + (dx * du_da.x + dy * du_da.y) / w;
-            jac[(i, 2)] = -du_db.z + (dx * du_db.x + dy * du_db.y) / w;
+            if let Some((dr_da, dr_db)) = &derivatives {
+                // ∂l/∂q = −∂Uz/∂q + (dx ∂Ux/∂q + dy ∂Uy/∂q) / w
+                let du_da = dr_da * p;
+                let du_db = dr_db * p;
+                jac[(i, 0)] = -1.0;
+                jac[(i, 1)] = -du_da.z + (dx * du_da.x + dy * du_da.y) / w;
+                jac[(i, 2)] = -du_db.z + (dx * du_db.x + dy * du_db.y) / w;
+            }
         }
-        Ok((legs, jac))
+        if let Some(out) = jacobian {
+            *out = jac;
+        }
+        Ok(legs)
     }
 
     /// Platform centre height and tilt (radians) for a program pose.
@@ -242,7 +260,8 @@ impl Rfmt5 {
         start: Vector3<f64>,
     ) -> Result<Vector3<f64>, KinematicsError> {
         let mut v = start;
-        let (legs, mut jac) = self.legs(&v)?;
+        let mut jac = Matrix3::zeros();
+        let legs = self.legs(&v, Some(&mut jac))?;
         let mut residual = legs - target;
         let mut norm = residual.amax();
         let scale = self.dims.platform_radius * self.dims.platform_radius;
@@ -269,7 +288,8 @@ impl Rfmt5 {
             let mut fraction = 1.0;
             loop {
                 let candidate = v + step * fraction;
-                if let Ok((legs, j)) = self.legs(&candidate) {
+                let mut j = Matrix3::zeros();
+                if let Ok(legs) = self.legs(&candidate, Some(&mut j)) {
                     let r = legs - target;
                     if r.amax() < norm {
                         v = candidate;
@@ -318,7 +338,7 @@ impl Kinematics for Rfmt5 {
     fn inverse(&self, pose: &Position, joints: &mut [f64]) -> Result<(), KinematicsError> {
         check_pose_input(pose, &self.axes, joints.len(), 5)?;
         let v = self.platform_of(pose);
-        let (legs, _) = self.legs(&v)?;
+        let legs = self.legs(&v, None)?;
         let (sa, ca) = v[1].sin_cos();
         let sb = v[2].sin();
         let tl = self.dims.tool_length;

@@ -188,13 +188,21 @@ pub fn xz_section(kins: &dyn Kinematics, base: &Position, coarse: f64, z_step: f
         lo: (i.lo - coarse).max(w.lo),
         hi: (i.hi + coarse).min(w.hi),
     };
-    let (bx, bz) = (widen(bx, xw), widen(bz, zw));
+    let (bx, mut bz) = (widen(bx, xw), widen(bz, zw));
+    // Rows on multiples of the step, so that their heights read well.
+    bz.lo = (bz.lo / z_step).floor() * z_step;
     let n = (bz.len() / z_step).ceil() as usize;
     let rows = (0..=n)
         .map(|i| bz.lo + i as f64 * z_step)
-        .map(|z| SectionRow {
-            z,
-            x: intervals(bx, z_step, |x| probe(x, z)),
+        .map(|z| {
+            let mut x = intervals(bx, z_step, |x| probe(x, z));
+            // A row wider than the coarse box (the section can flare
+            // between coarse rows) is scanned again over the whole window.
+            let touches = |i: &Interval| i.lo <= bx.lo || i.hi >= bx.hi;
+            if x.iter().any(touches) {
+                x = intervals(xw, z_step, |x| probe(x, z));
+            }
+            SectionRow { z, x }
         })
         .filter(|row| !row.x.is_empty())
         .collect();
