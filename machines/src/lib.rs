@@ -5,6 +5,7 @@
 //! the HAL wiring. Descriptions of the standard machines are embedded in the
 //! binary; [`load`] takes an embedded name or a path to a TOML file.
 
+pub mod corexy;
 pub mod description;
 pub mod oxglide;
 pub mod rfmt5;
@@ -26,10 +27,11 @@ pub const EMBEDDED: &[(&str, &str)] = &[
     ("oxglide-x", include_str!("../oxglide-x.toml")),
     ("oxglide-o", include_str!("../oxglide-o.toml")),
     ("rfmt5", include_str!("../rfmt5.toml")),
+    ("corexy", include_str!("../corexy.toml")),
 ];
 
 /// The kinematics modules a description may name in `kinematics`.
-pub const KINEMATICS: &[&str] = &["trivial", "oxglide-x", "oxglide-o", "rfmt5"];
+pub const KINEMATICS: &[&str] = &["trivial", "oxglide-x", "oxglide-o", "rfmt5", "corexy"];
 
 /// The name of the machine kerfd runs when no configuration names one.
 pub const DEFAULT_MACHINE: &str = "mill3";
@@ -148,6 +150,7 @@ pub fn from_toml(text: &str, origin: &str) -> Result<Machine, MachineError> {
             origin,
         )?),
         "rfmt5" => Arc::new(rfmt5::Rfmt5::from_description(d, origin)?),
+        "corexy" => Arc::new(corexy::CoreXy::from_description(d, origin)?),
         other => {
             return Err(MachineError::Key {
                 origin: origin.to_string(),
