@@ -101,7 +101,7 @@ impl Daemon {
             .clone()
             .try_into()
             .with_context(|| format!("{origin}: [hal]"))?;
-        let start = Position::ZERO;
+        let start = description.home();
         let n = kinematics.joints().len();
         let mut joints = vec![0.0; n];
         kinematics

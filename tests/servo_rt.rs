@@ -103,3 +103,53 @@ fn ticks_through_a_program_without_allocating() {
     assert_eq!(snap.position, expected_end);
     assert!(ticks > 1000, "ran {ticks} ticks: too few to mean anything");
 }
+
+/// Every embedded machine's inverse and forward kinematics, called as the
+/// tick calls them (caller storage, previous pose as the seed), allocate
+/// nothing — rfmt5's Newton iteration included.
+#[test]
+fn kinematics_of_every_machine_run_without_allocating() {
+    for (name, _) in kerf_machines::EMBEDDED {
+        let machine = kerf_machines::load(name).unwrap();
+        let kins = &*machine.kinematics;
+        let n = kins.joints().len();
+        let home = machine.home();
+        // A short path from home through the travel: each axis swept 10 %
+        // of its travel up, in 1000 steps.
+        let path: Vec<Position> = (0..1000)
+            .map(|i| {
+                let mut p = home;
+                for spec in kins.axes() {
+                    let span = spec.limits.max - spec.limits.min;
+                    let v = (p.get(spec.axis) + 0.1 * span * i as f64 / 1000.0)
+                        .clamp(spec.limits.min, spec.limits.max);
+                    p.set(spec.axis, v);
+                }
+                p
+            })
+            .collect();
+        let mut q = [0.0; kerf_motion::MAX_JOINTS];
+        let mut last = home;
+        COUNTING.with(|c| c.set(true));
+        for p in &path {
+            kins.inverse(p, &mut q[..n]).unwrap();
+            last = kins.forward(&q[..n], &last).unwrap();
+        }
+        COUNTING.with(|c| c.set(false));
+        assert_eq!(
+            ALLOCATIONS.load(Ordering::Relaxed),
+            0,
+            "{name}: kinematics allocated"
+        );
+        // The walk ends where the path does (1e-9 mm: the round trip bound).
+        let end = path.last().unwrap();
+        for spec in kins.axes() {
+            let (got, want) = (last.get(spec.axis), end.get(spec.axis));
+            assert!(
+                (got - want).abs() < 1e-9,
+                "{name} {}: {got} vs {want}",
+                spec.axis
+            );
+        }
+    }
+}

@@ -2,7 +2,8 @@
 
 use std::collections::BTreeMap;
 
-use kerf_interp::Axis;
+use kerf_interp::{Axis, Position};
+use kerf_motion::kinematics::{AxisSpec, JointSpec};
 use kerf_motion::Limits;
 use serde::Deserialize;
 
@@ -80,6 +81,10 @@ pub struct Description {
     /// Axis travel, keyed by lower-case axis letter.
     pub axes: BTreeMap<String, LimitsToml>,
     pub joints: Vec<JointToml>,
+    /// Where the machine rests when it starts: axis letter → coordinate
+    /// (mm, degrees for rotary axes). Axes not named are at 0.
+    #[serde(default)]
+    pub home: BTreeMap<String, f64>,
     /// HAL wiring, interpreted by the io crate.
     #[serde(default)]
     pub hal: toml::Table,
@@ -135,7 +140,59 @@ impl Description {
             )
             .map_err(|(k, r)| key_err(k, r))?;
         }
+        for (name, value) in &d.home {
+            if !d.axes.contains_key(name) {
+                return Err(key_err(
+                    format!("home.{name}"),
+                    "not one of this machine's [axes]".into(),
+                ));
+            }
+            if !value.is_finite() {
+                return Err(key_err(
+                    format!("home.{name}"),
+                    format!("must be a finite number, got {value}"),
+                ));
+            }
+        }
+        for (name, value) in &d.dimensions {
+            if !value.is_finite() {
+                return Err(key_err(
+                    format!("dimensions.{name}"),
+                    format!("must be a finite number, got {value}"),
+                ));
+            }
+        }
         Ok(d)
+    }
+
+    /// The pose the machine starts at: the `[home]` table, other axes at 0.
+    pub fn home(&self) -> Position {
+        let mut p = Position::ZERO;
+        for (name, value) in &self.home {
+            if let Some(axis) = name.chars().next().and_then(Axis::from_letter) {
+                p.set(axis, *value);
+            }
+        }
+        p
+    }
+
+    /// The axes as kinematics specs, in canonical order.
+    pub fn axis_specs(&self) -> Vec<AxisSpec> {
+        self.axis_limits()
+            .into_iter()
+            .map(|(axis, limits)| AxisSpec { axis, limits })
+            .collect()
+    }
+
+    /// The joints as kinematics specs, in joint order.
+    pub fn joint_specs(&self) -> Vec<JointSpec> {
+        self.joints
+            .iter()
+            .map(|j| JointSpec {
+                name: j.name.clone(),
+                limits: j.limits(),
+            })
+            .collect()
     }
 
     /// The axes in canonical order with their limits.
@@ -160,6 +217,91 @@ impl Description {
             .collect();
         v.sort_by_key(|(a, _)| *a);
         v
+    }
+}
+
+impl Description {
+    /// Check that this machine fits a kinematics module: exactly the axes
+    /// `axes`, `joints` joints, and no dimension key outside `dimensions`.
+    /// `kinematics` names the module in the messages.
+    pub fn expect_layout(
+        &self,
+        origin: &str,
+        kinematics: &str,
+        axes: &[Axis],
+        joints: usize,
+        dimensions: &[&str],
+    ) -> Result<(), MachineError> {
+        let key_err = |key: String, reason: String| MachineError::Key {
+            origin: origin.to_string(),
+            key,
+            reason,
+        };
+        let letters = |list: &mut dyn Iterator<Item = Axis>| {
+            list.map(|a| a.letter().to_ascii_lowercase().to_string())
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let have: Vec<Axis> = self.axis_limits().iter().map(|(a, _)| *a).collect();
+        if have != axes {
+            return Err(key_err(
+                "axes".into(),
+                format!(
+                    "{kinematics} kinematics needs exactly the axes {}, found {}",
+                    letters(&mut axes.iter().copied()),
+                    letters(&mut have.into_iter())
+                ),
+            ));
+        }
+        if self.joints.len() != joints {
+            return Err(key_err(
+                "joints".into(),
+                format!(
+                    "{kinematics} kinematics has {joints} joints, found {}",
+                    self.joints.len()
+                ),
+            ));
+        }
+        if let Some(name) = self
+            .dimensions
+            .keys()
+            .find(|k| !dimensions.contains(&k.as_str()))
+        {
+            return Err(key_err(
+                format!("dimensions.{name}"),
+                format!(
+                    "not a dimension of {kinematics} kinematics (it has {})",
+                    dimensions.join(", ")
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The dimension `key`, which must be given and be greater than zero.
+    pub fn positive_dimension(&self, origin: &str, key: &str) -> Result<f64, MachineError> {
+        let value = self.dimension(origin, key)?;
+        if value > 0.0 {
+            Ok(value)
+        } else {
+            Err(MachineError::Key {
+                origin: origin.to_string(),
+                key: format!("dimensions.{key}"),
+                reason: format!("must be greater than zero, got {value}"),
+            })
+        }
+    }
+
+    /// The dimension `key`, which must be given.
+    pub fn dimension(&self, origin: &str, key: &str) -> Result<f64, MachineError> {
+        self.dimensions
+            .get(key)
+            .copied()
+            .ok_or_else(|| MachineError::Key {
+                origin: origin.to_string(),
+                key: format!("dimensions.{key}"),
+                reason: format!("missing: {} kinematics needs it", self.kinematics),
+            })
     }
 }
 

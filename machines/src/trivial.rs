@@ -8,6 +8,7 @@ use kerf_interp::{Axis, Position};
 use kerf_motion::kinematics::{AxisSpec, JointSpec, Kinematics, KinematicsError};
 
 use crate::description::{Description, MachineError};
+use crate::{check_joint_input, check_pose_input};
 
 /// Joint i = axis `map[i]`.
 #[derive(Clone, Debug)]
@@ -91,12 +92,7 @@ impl Kinematics for Trivial {
     }
 
     fn inverse(&self, pose: &Position, joints: &mut [f64]) -> Result<(), KinematicsError> {
-        if joints.len() != self.map.len() {
-            return Err(KinematicsError::JointCount {
-                expected: self.map.len(),
-                got: joints.len(),
-            });
-        }
+        check_pose_input(pose, &self.axes, joints.len(), self.map.len())?;
         for (q, axis) in joints.iter_mut().zip(&self.map) {
             *q = pose.get(*axis);
         }
@@ -104,12 +100,7 @@ impl Kinematics for Trivial {
     }
 
     fn forward(&self, joints: &[f64], _seed: &Position) -> Result<Position, KinematicsError> {
-        if joints.len() != self.map.len() {
-            return Err(KinematicsError::JointCount {
-                expected: self.map.len(),
-                got: joints.len(),
-            });
-        }
+        check_joint_input(joints, self.map.len())?;
         let mut p = [0.0; 9];
         // Reverse order so the first joint on an axis wins.
         for (q, axis) in joints.iter().zip(&self.map).rev() {

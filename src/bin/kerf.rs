@@ -68,6 +68,43 @@ enum Cmd {
         #[arg(long)]
         trapezoidal: bool,
     },
+    /// Joints for a pose (inverse) or the pose for joints (forward), offline.
+    Kins {
+        /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5) or a TOML file.
+        #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
+        machine: String,
+        /// Print JSON: {"joints": [...]}, {"pose": {...}} or {"error": "..."}.
+        #[arg(long)]
+        json: bool,
+        /// Do not check axis travel and joint strokes (reach is still checked).
+        #[arg(long)]
+        no_limits: bool,
+        #[command(subcommand)]
+        direction: KinsDirection,
+    },
+    /// Compute and plot the reachable workspace of a machine, offline.
+    Workspace {
+        /// Machine: an embedded name or a TOML file.
+        #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
+        machine: String,
+        /// Draw the workspace into this SVG file.
+        #[arg(long, value_name = "FILE")]
+        plot: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum KinsDirection {
+    /// Pose to joints: X Y Z, then the machine's other axes (A B ...; mm, degrees).
+    Inverse {
+        #[arg(allow_hyphen_values = true, num_args = 1.., value_name = "COORD")]
+        values: Vec<String>,
+    },
+    /// Joints to pose: one value per joint, in joint order.
+    Forward {
+        #[arg(allow_hyphen_values = true, num_args = 1.., value_name = "JOINT")]
+        values: Vec<String>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -92,6 +129,25 @@ fn main() -> ExitCode {
             json,
             trapezoidal,
         } => cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal),
+        Cmd::Kins {
+            machine,
+            json,
+            no_limits,
+            direction,
+        } => {
+            let (direction, values) = match direction {
+                KinsDirection::Inverse { values } => (cli::kins::Direction::Inverse, values),
+                KinsDirection::Forward { values } => (cli::kins::Direction::Forward, values),
+            };
+            cli::kins::kins(&cli::kins::Request {
+                machine,
+                direction,
+                values,
+                json,
+                no_limits,
+            })
+        }
+        Cmd::Workspace { machine, plot } => cli::workspace::workspace(&machine, plot.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

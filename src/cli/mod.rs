@@ -4,9 +4,11 @@
 //! `src/bin/kerf.rs` only parses arguments and dispatches.
 
 pub mod canon;
+pub mod kins;
 pub mod plan;
 pub mod run;
 pub mod status;
+pub mod workspace;
 
 use crate::client::ClientError;
 use crate::protocol::Status;
