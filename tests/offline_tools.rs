@@ -98,3 +98,48 @@ fn plan_plot_writes_an_svg() {
     let human = String::from_utf8_lossy(&out.stdout);
     assert!(human.contains("cycle time") && human.contains("axis X"));
 }
+
+#[test]
+fn joints_stay_within_their_limits_on_the_o_x_glide() {
+    // The crossed O-X machine with slow sliders, so the joints rather than
+    // the axes bind: near the bottom of the travel a slider moves about 8
+    // times as fast as the tool moves in Z.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/machines/oxglide-x.toml"
+    ))
+    .unwrap();
+    let slow = text.replace("max_velocity = 500.0", "max_velocity = 60.0");
+    assert_ne!(slow, text, "the joint limits to lower are in the file");
+    let machine = dir.path().join("slow-ox.toml");
+    std::fs::write(&machine, slow).unwrap();
+    let p = program(
+        &dir,
+        "ox.ngc",
+        "G21 G90\nG1 X250 Z-350 F3000\nG1 Z-295\nG1 X200 Z-340\nG1 X320\nM2\n",
+    );
+    let out = kerf(&["plan", &p, "--machine", machine.to_str().unwrap(), "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let joint_velocity = json["joints"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["velocity"].as_f64().unwrap())
+        .fold(0.0, f64::max);
+    // Measured by finite differences of the sampled joint positions.
+    assert!(
+        joint_velocity <= 1.0 + 1e-6,
+        "joint velocity use {joint_velocity}"
+    );
+    assert!(
+        joint_velocity > 0.9,
+        "the slow joints should bind: use {joint_velocity}"
+    );
+    assert!(json["max_limit_ratio"].as_f64().unwrap() <= 1.0 + 1e-6);
+}

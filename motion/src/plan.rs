@@ -722,7 +722,10 @@ impl<'k> Planner<'k> {
         let h = (length / samples as f64 / 4.0).clamp(1e-6, 0.5);
         let (mut v, mut a, mut v_curv) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         for k in 0..=samples {
-            let s = length * k as f64 / samples as f64;
+            // A symmetric stencil inside the segment: at its ends a clamped
+            // stencil would turn the second difference into a first one.
+            let s = (length * k as f64 / samples as f64)
+                .clamp(h.min(length / 2.0), (length - h).max(length / 2.0));
             let (s0, s1) = ((s - h).max(0.0), (s + h).min(length));
             let mut q = [[0.0; MAX_JOINTS]; 3];
             let ok = [s0, s, s1].iter().enumerate().all(|(m, &si)| {
@@ -734,9 +737,12 @@ impl<'k> Planner<'k> {
                 continue;
             }
             let hh = (s1 - s0) / 2.0;
+            // Between samples |dq/ds| can grow by up to |d²q/ds²| times half
+            // the sample spacing: bound it rather than trust the sample.
+            let spacing = length / samples as f64;
             for (jn, spec) in joints.iter().enumerate() {
-                let d1 = (q[2][jn] - q[0][jn]) / (s1 - s0);
                 let d2 = (q[2][jn] - 2.0 * q[1][jn] + q[0][jn]) / (hh * hh);
+                let d1 = ((q[2][jn] - q[0][jn]) / (s1 - s0)).abs() + d2.abs() * spacing / 2.0;
                 let l = spec.limits;
                 if d1.abs() > 0.0 {
                     v = v.min(l.max_velocity / d1.abs());

@@ -67,6 +67,10 @@ enum Cmd {
         /// Acceleration-limited (trapezoidal) profiles instead of jerk-limited.
         #[arg(long)]
         trapezoidal: bool,
+        /// List the planned segments and their limits (speeds in mm/min,
+        /// acceleration mm/s², jerk mm/s³) instead of running the plan.
+        #[arg(long)]
+        segments: bool,
     },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
@@ -128,7 +132,14 @@ fn main() -> ExitCode {
             plot,
             json,
             trapezoidal,
-        } => cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal),
+            segments,
+        } => {
+            if segments {
+                cli::plan::segments(&file, &machine)
+            } else {
+                cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal)
+            }
+        }
         Cmd::Kins {
             machine,
             json,

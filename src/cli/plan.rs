@@ -1,5 +1,6 @@
 //! `kerf plan` and `kerf check`: plan a program offline for a machine.
 
+use std::io::Write;
 use std::path::Path;
 
 use kerf_interp::{Interpreter, Position};
@@ -14,9 +15,11 @@ fn load(machine: &str) -> Result<kerf_machines::Machine, Failure> {
     kerf_machines::load(machine).map_err(|e| Failure::new(e.to_string()))
 }
 
-fn open(file: &Path) -> Result<Interpreter<std::io::BufReader<std::fs::File>>, Failure> {
-    Interpreter::open(file, Position::ZERO)
-        .map_err(|e| Failure::new(format!("{}: {e}", file.display())))
+fn open(
+    file: &Path,
+    start: Position,
+) -> Result<Interpreter<std::io::BufReader<std::fs::File>>, Failure> {
+    Interpreter::open(file, start).map_err(|e| Failure::new(format!("{}: {e}", file.display())))
 }
 
 /// `kerf check`: interpret the whole program and check every move against
@@ -24,10 +27,11 @@ fn open(file: &Path) -> Result<Interpreter<std::io::BufReader<std::fs::File>>, F
 pub fn check(file: &Path, machine: &str, json_out: bool) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
-    let mut planner = Planner::new(kins, Position::ZERO, PlannerConfig::default());
+    let home = machine.home();
+    let mut planner = Planner::new(kins, home, PlannerConfig::default());
     let mut problems = Vec::new();
     let mut moves = 0usize;
-    for canon in open(file)? {
+    for canon in open(file, home)? {
         match canon {
             Err(e) => {
                 problems.push(e.to_string());
@@ -66,6 +70,67 @@ pub fn check(file: &Path, machine: &str, json_out: bool) -> Result<(), Failure> 
     }
 }
 
+/// `kerf plan --segments`: list the planned segments with their limits,
+/// to see what holds a program back.
+pub fn segments(file: &Path, machine: &str) -> Result<(), Failure> {
+    let machine = load(machine)?;
+    let kins = &*machine.kinematics;
+    let home = machine.home();
+    let mut planner = Planner::new(kins, home, PlannerConfig::default());
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut print = |seg: Option<kerf_motion::Segment>| -> std::io::Result<()> {
+        let Some(seg) = seg else {
+            return writeln!(
+                out,
+                "{:>6} {:<6} {:>10} {:>10} {:>10} {:>11} {:>12} {:>10}",
+                "line", "kind", "length", "feed", "v max", "a max", "j max", "exit"
+            );
+        };
+        let kind = match (seg.kind, seg.shape) {
+            (kerf_motion::SegmentKind::Dwell { .. }, _) => "dwell",
+            (_, kerf_motion::path::Shape::Blend(_)) => "blend",
+            (_, kerf_motion::path::Shape::Arc(_)) => "arc",
+            (kerf_motion::SegmentKind::Rapid, _) => "rapid",
+            _ => "line",
+        };
+        writeln!(
+            out,
+            "{:>6} {:<6} {:>10.4} {:>10.1} {:>10.1} {:>11.1} {:>12.0} {:>10.1}",
+            seg.line,
+            kind,
+            seg.length,
+            seg.feed * 60.0,
+            seg.max_velocity * 60.0,
+            seg.max_acceleration,
+            seg.max_jerk,
+            seg.exit_velocity * 60.0
+        )
+    };
+    // A closed pipe (`| head`) ends the listing quietly.
+    if print(None).is_err() {
+        return Ok(());
+    }
+    for canon in open(file, home)? {
+        let canon = canon.map_err(|e| Failure::new(e.to_string()))?;
+        planner
+            .plan(&canon)
+            .map_err(|e| Failure::new(e.to_string()))?;
+        while let Some(seg) = planner.next_segment() {
+            if print(Some(seg)).is_err() {
+                return Ok(());
+            }
+        }
+    }
+    planner.finish();
+    while let Some(seg) = planner.next_segment() {
+        if print(Some(seg)).is_err() {
+            return Ok(());
+        }
+    }
+    Ok(())
+}
+
 /// `kerf plan`: plan and execute the program on a virtual clock, print
 /// cycle time, largest path deviation and limit use, and optionally plot.
 pub fn plan(
@@ -84,7 +149,8 @@ pub fn plan(
         },
         record: if plot.is_some() { 2000 } else { 0 },
     };
-    let report = offline::run(open(file)?, kins, Position::ZERO, config)
+    let home = machine.home();
+    let report = offline::run(open(file, home)?, kins, home, config)
         .map_err(|e| Failure::new(e.to_string()))?;
     if let Some(out) = plot {
         let names: Vec<String> = kins.joints().iter().map(|j| j.name.clone()).collect();
