@@ -150,26 +150,50 @@ impl Blend {
         k1: &Vec9,
         scale: f64,
     ) -> Blend {
+        Blend::from_control(Blend::hermite_control(p0, t0, k0, p1, t1, k1, scale))
+    }
+
+    /// The control points of [`hermite`](Self::hermite).
+    pub fn hermite_control(
+        p0: &Vec9,
+        t0: &Vec9,
+        k0: &Vec9,
+        p1: &Vec9,
+        t1: &Vec9,
+        k1: &Vec9,
+        scale: f64,
+    ) -> [Vec9; 6] {
         // B′(0) = 5(Q1 − Q0), B″(0) = 20(Q2 − 2Q1 + Q0), and mirrored at 1:
         // with B′ = scale·t and B″ = scale²·k these give the control points.
         let l2 = scale * scale;
-        let control = [
+        [
             *p0,
             std::array::from_fn(|i| p0[i] + scale * t0[i] / 5.0),
             std::array::from_fn(|i| p0[i] + 2.0 * scale * t0[i] / 5.0 + l2 * k0[i] / 20.0),
             std::array::from_fn(|i| p1[i] - 2.0 * scale * t1[i] / 5.0 + l2 * k1[i] / 20.0),
             std::array::from_fn(|i| p1[i] - scale * t1[i] / 5.0),
             *p1,
-        ];
-        let mut b = Blend {
-            control,
-            table: [0.0; 17],
-        };
+        ]
+    }
+
+    /// The blend with these control points, with its arc-length table.
+    pub fn from_control(control: [Vec9; 6]) -> Blend {
+        let mut b = Blend::untabled(control);
         for i in 0..16 {
             let (u0, u1) = (i as f64 / 16.0, (i + 1) as f64 / 16.0);
             b.table[i + 1] = b.table[i] + b.speed_integral(u0, u1);
         }
         b
+    }
+
+    /// The blend without its arc-length table: enough for
+    /// [`point_at_parameter`](Self::point_at_parameter), e.g. to test a
+    /// candidate shape before keeping it.
+    pub fn untabled(control: [Vec9; 6]) -> Blend {
+        Blend {
+            control,
+            table: [0.0; 17],
+        }
     }
 
     /// |d B / du| (the hodograph's length), cheaper than [`derivatives`].

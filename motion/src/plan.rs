@@ -175,17 +175,19 @@ pub struct Planner<'k> {
 /// Directions closer than this (|u1 − u2|) are one straight line.
 const STRAIGHT: f64 = 1e-9;
 
-/// Distance from `p` to the segment a–b.
-fn distance_to_line(p: &Vec9, l: &Line) -> f64 {
-    let d: Vec9 = std::array::from_fn(|i| l.end[i] - l.start[i]);
-    let w: Vec9 = std::array::from_fn(|i| p[i] - l.start[i]);
-    let dd: f64 = d.iter().map(|x| x * x).sum();
+/// Distance in X Y Z from `p` to the line segment `l` (blends are made
+/// between XYZ-only lines, so the other axes do not differ).
+fn distance_to_xyz_line(p: &Vec9, l: &Line) -> f64 {
+    let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
+    let w: [f64; 3] = std::array::from_fn(|i| p[i] - l.start[i]);
+    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
     let t = if dd > 0.0 {
-        ((0..9).map(|i| w[i] * d[i]).sum::<f64>() / dd).clamp(0.0, 1.0)
+        ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
     } else {
         0.0
     };
-    norm(&std::array::from_fn(|i| w[i] - t * d[i]))
+    let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
+    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
 }
 
 impl<'k> Planner<'k> {
@@ -425,14 +427,14 @@ impl<'k> Planner<'k> {
         legs: (f64, f64),
         k0: &Vec9,
         k1: &Vec9,
-    ) -> Option<Blend> {
+    ) -> Option<[Vec9; 6]> {
         let (la, lb) = (a.programmed?, b.programmed?);
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
         let (u1, u2) = (la.direction(), lb.direction());
         let corner = la.end;
-        let blend = Blend::hermite(
+        let control = Blend::hermite_control(
             &std::array::from_fn(|i| corner[i] - legs.0 * u1[i]),
             &u1,
             k0,
@@ -441,11 +443,12 @@ impl<'k> Planner<'k> {
             k1,
             legs.0 + legs.1,
         );
+        let candidate = Blend::untabled(control);
         let within = (1..32).all(|k| {
-            let p = blend.point_at_parameter(k as f64 / 32.0);
-            distance_to_line(&p, &la).min(distance_to_line(&p, &lb)) <= tolerance
+            let p = candidate.point_at_parameter(k as f64 / 32.0);
+            distance_to_xyz_line(&p, &la).min(distance_to_xyz_line(&p, &lb)) <= tolerance
         });
-        within.then_some(blend)
+        within.then_some(control)
     }
 
     /// Emit what the waiting moves decide. With `last`, everything goes and
@@ -499,8 +502,8 @@ impl<'k> Planner<'k> {
                     }
                 }
             }
-            let blend = match blend {
-                Some(bl) => bl,
+            let control = match blend {
+                Some(control) => control,
                 None => {
                     // Zero curvature at b's end. With k0 fixed the legs are
                     // too (a's midpoint is shared); otherwise shrink them
@@ -516,7 +519,7 @@ impl<'k> Planner<'k> {
                         }
                     }
                     match found {
-                        Some(bl) => bl,
+                        Some(control) => control,
                         None => {
                             // No blend fits: stop at the corner.
                             let exit = self.junction(&a, &b);
@@ -552,7 +555,11 @@ impl<'k> Planner<'k> {
                 } else {
                     SegmentKind::Feed
                 };
-            let mut blend = self.segment(kind, b_segment.line, Shape::Blend(blend));
+            let mut blend = self.segment(
+                kind,
+                b_segment.line,
+                Shape::Blend(Blend::from_control(control)),
+            );
             blend.feed = a.segment.feed.min(b_segment.feed);
             // Equal tangents and curvatures meet at both ends of the blend;
             // a consumed line leaves nothing (or rounding) between blends.
