@@ -10,6 +10,13 @@
 //! [[hal.stepdir.joints]]
 //! joint = 0
 //! steps_per_mm = 800.0
+//!
+//! [hal.can]                  # joint 3: a CiA 402 drive on can0
+//! interface = "can0"
+//! [[hal.can.drives]]
+//! joint = 3
+//! node = 1
+//! counts_per_mm = 10000.0
 //! ```
 //!
 //! A joint is claimed by at most one backend section; the rest go to
@@ -18,6 +25,7 @@
 
 use serde::Deserialize;
 
+use crate::can::CanConfig;
 use crate::sim::SimConfig;
 use crate::stepdir::StepDirConfig;
 
@@ -26,7 +34,7 @@ use crate::stepdir::StepDirConfig;
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum HalConfigError {
     /// `backend` names no known backend.
-    #[error("unknown HAL backend {0:?}; known backends: sim, stepdir")]
+    #[error("unknown HAL backend {0:?}; known backends: sim, stepdir, can")]
     UnknownBackend(String),
     /// A key has a bad value, or the wiring is inconsistent.
     #[error("key `hal.{key}`: {reason}")]
@@ -70,6 +78,9 @@ pub struct HalConfig {
     /// `[hal.stepdir]`: step/dir joints driven through a serial MCU.
     #[serde(default)]
     pub stepdir: Option<StepDirConfig>,
+    /// `[hal.can]`: CiA 402 drives on a CAN bus.
+    #[serde(default)]
+    pub can: Option<CanConfig>,
 }
 
 /// Which backend drives a joint.
@@ -79,6 +90,8 @@ pub enum Wire {
     Sim,
     /// Entry `index` of `hal.stepdir.joints`.
     StepDir(usize),
+    /// Entry `index` of `hal.can.drives`.
+    Can(usize),
 }
 
 impl HalConfig {
@@ -115,16 +128,25 @@ impl HalConfig {
                 )?;
             }
         }
+        if let Some(can) = &self.can {
+            for (i, d) in can.drives.iter().enumerate() {
+                claim(d.joint, Wire::Can(i), format!("can.drives[{i}].joint"))?;
+            }
+        }
         let default = match self.backend.as_deref() {
             None => None,
             Some("sim") => Some(Wire::Sim),
-            Some(b @ "stepdir") => {
+            Some(b @ ("stepdir" | "can")) => {
                 return Err(HalConfigError::key(
                     "backend",
                     format!(
                         "`{b}` needs per-joint settings: list its joints in `[[hal.{}]]` \
                          and leave `backend` for the remaining joints (\"sim\") or out",
-                        "stepdir.joints"
+                        if b == "can" {
+                            "can.drives"
+                        } else {
+                            "stepdir.joints"
+                        }
                     ),
                 ))
             }

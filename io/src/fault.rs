@@ -63,6 +63,12 @@ impl FaultCell {
             HalFault::Link { reason }
         })
     }
+
+    /// Forget the latched fault (the operator's reset); a fault that
+    /// still stands is raised again by whoever detects it.
+    pub fn clear(&self) {
+        self.state.store(EMPTY, Ordering::Release);
+    }
 }
 
 #[cfg(test)]

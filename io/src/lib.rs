@@ -8,13 +8,15 @@
 //! queues and atomics).
 //!
 //! Backends: [`sim`] (simulated drives), [`stepdir`] (step/dir through a
-//! microcontroller on a serial line). The machine description wires each
-//! joint to one of them; [`build`] returns one [`Hal`] that routes every
-//! joint to its backend.
+//! microcontroller on a serial line), [`can`] (CiA 402 drives over CAN).
+//! The machine description wires each joint to one of them; [`build`]
+//! returns one [`Hal`] that routes every joint to its backend.
 //!
 //! This crate depends on none of kerf's other crates: it deals only in joint
 //! numbers, in the joint's own units (mm for linear drives).
 
+pub mod can;
+pub mod clock;
 pub mod config;
 pub mod sim;
 pub mod stepdir;

@@ -3,7 +3,7 @@
 
 use crate::config::Wire;
 use crate::{
-    stepdir, Feedback, Hal, HalConfig, HalConfigError, HalFault, Setpoints, SimHal, MAX_JOINTS,
+    can, stepdir, Feedback, Hal, HalConfig, HalConfigError, HalFault, Setpoints, SimHal, MAX_JOINTS,
 };
 
 /// One backend and the machine joints it drives (its joint `i` is machine
@@ -55,6 +55,19 @@ pub(crate) fn build(config: &HalConfig, initial: &[f64]) -> Result<Box<dyn Hal>,
             ordered.joints.sort_by_key(|j| j.joint);
             parts.push(Part {
                 hal: Box::new(stepdir::StepDirHal::open(&ordered, &at)?),
+                joints,
+            });
+        }
+    }
+    if let Some(c) = &config.can {
+        c.validate()?;
+        let joints = pick(&|w| matches!(w, Wire::Can(_)));
+        if !joints.is_empty() {
+            let at: Vec<f64> = joints.iter().map(|&j| initial[j]).collect();
+            let mut ordered = c.clone();
+            ordered.drives.sort_by_key(|d| d.joint);
+            parts.push(Part {
+                hal: Box::new(can::CanHal::open(&ordered, &at)?),
                 joints,
             });
         }

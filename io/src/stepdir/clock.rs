@@ -1,53 +1,6 @@
-//! Host clocks and the host ↔ MCU clock estimate.
+//! The host ↔ MCU clock estimate (and the host clocks, re-exported).
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
-
-/// A monotonic host clock in nanoseconds. The link thread reads time only
-/// through this, so tests can run the link on a virtual clock.
-pub trait Clock: Send + Sync {
-    /// Nanoseconds since an arbitrary origin; never decreases.
-    fn now_ns(&self) -> u64;
-}
-
-/// `CLOCK_MONOTONIC`.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Monotonic;
-
-impl Clock for Monotonic {
-    fn now_ns(&self) -> u64 {
-        let mut ts = libc::timespec {
-            tv_sec: 0,
-            tv_nsec: 0,
-        };
-        // SAFETY: valid pointer to a timespec; CLOCK_MONOTONIC always exists.
-        unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-        ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-    }
-}
-
-/// A clock that moves only when told: deterministic tests and offline
-/// simulation.
-#[derive(Clone, Debug, Default)]
-pub struct VirtualClock(Arc<AtomicU64>);
-
-impl VirtualClock {
-    /// A virtual clock at `ns`.
-    pub fn at(ns: u64) -> VirtualClock {
-        VirtualClock(Arc::new(AtomicU64::new(ns)))
-    }
-
-    /// Move the clock forward by `ns`.
-    pub fn advance(&self, ns: u64) {
-        self.0.fetch_add(ns, Ordering::SeqCst);
-    }
-}
-
-impl Clock for VirtualClock {
-    fn now_ns(&self) -> u64 {
-        self.0.load(Ordering::SeqCst)
-    }
-}
+pub use crate::clock::{Clock, Monotonic, VirtualClock};
 
 /// Estimate of the MCU clock as a function of host time, from clock
 /// request/reply pairs.
