@@ -26,6 +26,7 @@
 use serde::Deserialize;
 
 use crate::can::CanConfig;
+use crate::pins::PinConfig;
 use crate::sim::SimConfig;
 use crate::stepdir::StepDirConfig;
 
@@ -81,6 +82,9 @@ pub struct HalConfig {
     /// `[hal.can]`: CiA 402 drives on a CAN bus.
     #[serde(default)]
     pub can: Option<CanConfig>,
+    /// `[hal.pins]`: names of the digital and analog I/O pins.
+    #[serde(default)]
+    pub pins: PinConfig,
 }
 
 /// Which backend drives a joint.

@@ -18,6 +18,8 @@
 pub mod can;
 pub mod clock;
 pub mod config;
+pub mod pins;
+pub mod shm;
 pub mod sim;
 pub mod stepdir;
 
@@ -25,6 +27,7 @@ mod fault;
 mod route;
 
 pub use config::{HalConfig, HalConfigError};
+pub use pins::{PinBank, PinConfig};
 pub use sim::SimHal;
 
 /// Largest number of joints a backend serves (equals kerf-motion's MAX_JOINTS).

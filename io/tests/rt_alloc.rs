@@ -13,6 +13,8 @@ use std::sync::Arc;
 use kerf_io::can::sim::{SimBus, SimDrive};
 use kerf_io::can::{BusKind, CanConfig, CanHal, DriveConfig, Mode};
 use kerf_io::clock::VirtualClock;
+use kerf_io::pins::{PinBank, PinConfig};
+use kerf_io::shm::{ShmExport, StatusFrame};
 use kerf_io::{build, Feedback, Hal, HalConfig, Setpoints};
 
 struct Counting;
@@ -133,4 +135,27 @@ fn exchange_never_allocates() {
     });
     assert_eq!(n, 0, "stepdir exchange allocated");
     assert!(d.hal.stats().steps > 40_000);
+
+    // Status and pins export: the tick's side only queues and reads atomics.
+    let pins = PinConfig {
+        digital_out: vec!["out0".into()],
+        digital_in: vec!["in0".into()],
+        analog_out: vec!["aout0".into()],
+        analog_in: vec!["ain0".into()],
+    };
+    let mut export =
+        ShmExport::start(&format!("kerf-alloc-{}", std::process::id()), &pins).unwrap();
+    let mut bank = PinBank::new(&pins);
+    let mut frame = StatusFrame::default();
+    let n = count(|| {
+        for k in 0..200u64 {
+            frame.tick = k;
+            bank.set_digital(0, k % 2 == 0).unwrap();
+            bank.set_analog_synced(0, k as f64).unwrap();
+            bank.motion_started();
+            export.exchange(&frame, &mut bank);
+        }
+    });
+    assert_eq!(n, 0, "shm export exchange allocated");
+    assert!(!export.failed());
 }
