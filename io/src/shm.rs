@@ -106,6 +106,9 @@ pub fn pin_service(instance: &str, pin: &str) -> String {
     format!("kerf/{instance}/pin/{pin}")
 }
 
+type PortFactory<T> =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>;
+
 /// Errors setting up shared memory.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("shared memory service {service}: {reason}")]
@@ -158,19 +161,29 @@ impl Services {
             .map_err(|e| err(format!("{e:?}")))
     }
 
+    /// Open `name` for payload `T` and make a port on it with `make`.
+    fn port<T, P, E>(
+        &self,
+        name: String,
+        make: impl FnOnce(&PortFactory<T>) -> Result<P, E>,
+    ) -> Result<P, ShmError>
+    where
+        T: std::fmt::Debug + ZeroCopySend + Copy + 'static,
+        E: std::fmt::Debug,
+    {
+        let factory = self.open::<T>(&name)?;
+        make(&factory).map_err(|e| ShmError {
+            service: name,
+            reason: format!("{e:?}"),
+        })
+    }
+
     /// A publisher of status frames.
     pub fn status_publisher(
         &self,
         instance: &str,
     ) -> Result<Publisher<ipc::Service, StatusFrame, ()>, ShmError> {
-        let name = status_service(instance);
-        self.open::<StatusFrame>(&name)?
-            .publisher_builder()
-            .create()
-            .map_err(|e| ShmError {
-                service: name,
-                reason: format!("{e:?}"),
-            })
+        self.port(status_service(instance), |f| f.publisher_builder().create())
     }
 
     /// A subscriber to status frames.
@@ -178,14 +191,9 @@ impl Services {
         &self,
         instance: &str,
     ) -> Result<Subscriber<ipc::Service, StatusFrame, ()>, ShmError> {
-        let name = status_service(instance);
-        self.open::<StatusFrame>(&name)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| ShmError {
-                service: name,
-                reason: format!("{e:?}"),
-            })
+        self.port(status_service(instance), |f| {
+            f.subscriber_builder().create()
+        })
     }
 
     /// A publisher of a pin's values.
@@ -194,14 +202,9 @@ impl Services {
         instance: &str,
         pin: &str,
     ) -> Result<Publisher<ipc::Service, PinSample, ()>, ShmError> {
-        let name = pin_service(instance, pin);
-        self.open::<PinSample>(&name)?
-            .publisher_builder()
-            .create()
-            .map_err(|e| ShmError {
-                service: name,
-                reason: format!("{e:?}"),
-            })
+        self.port(pin_service(instance, pin), |f| {
+            f.publisher_builder().create()
+        })
     }
 
     /// A subscriber to a pin's values.
@@ -210,14 +213,9 @@ impl Services {
         instance: &str,
         pin: &str,
     ) -> Result<Subscriber<ipc::Service, PinSample, ()>, ShmError> {
-        let name = pin_service(instance, pin);
-        self.open::<PinSample>(&name)?
-            .subscriber_builder()
-            .create()
-            .map_err(|e| ShmError {
-                service: name,
-                reason: format!("{e:?}"),
-            })
+        self.port(pin_service(instance, pin), |f| {
+            f.subscriber_builder().create()
+        })
     }
 }
 
