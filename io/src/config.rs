@@ -85,6 +85,19 @@ pub struct HalConfig {
     /// `[hal.pins]`: names of the digital and analog I/O pins.
     #[serde(default)]
     pub pins: PinConfig,
+    /// `[hal.shm]`: export status and pins over shared memory.
+    #[serde(default)]
+    pub shm: Option<ShmConfig>,
+}
+
+/// `[hal.shm]`: present to publish status and pins over iceoryx2.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ShmConfig {
+    /// Instance name in the service names (`kerf/INSTANCE/...`); default:
+    /// the machine's name.
+    #[serde(default)]
+    pub instance: Option<String>,
 }
 
 /// Which backend drives a joint.

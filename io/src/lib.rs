@@ -10,7 +10,9 @@
 //! Backends: [`sim`] (simulated drives), [`stepdir`] (step/dir through a
 //! microcontroller on a serial line), [`can`] (CiA 402 drives over CAN).
 //! The machine description wires each joint to one of them; [`build`]
-//! returns one [`Hal`] that routes every joint to its backend.
+//! returns one [`Hal`] that routes every joint to its backend. [`pins`]
+//! holds the I/O pins M62–M68 act on; [`shm`] exports status and pins to
+//! other processes over iceoryx2 shared memory.
 //!
 //! This crate depends on none of kerf's other crates: it deals only in joint
 //! numbers, in the joint's own units (mm for linear drives).
@@ -26,7 +28,7 @@ pub mod stepdir;
 mod fault;
 mod route;
 
-pub use config::{HalConfig, HalConfigError};
+pub use config::{HalConfig, HalConfigError, ShmConfig};
 pub use pins::{PinBank, PinConfig};
 pub use sim::SimHal;
 
