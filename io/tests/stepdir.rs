@@ -236,6 +236,32 @@ fn a_corrupted_answer_is_a_crc_fault() {
 }
 
 #[test]
+fn after_a_fault_only_the_operator_reset_moves_again() {
+    let mcu = Mcu::start(
+        "reset",
+        &["--channels", "1", "--corrupt-reply", "10", "--persist"],
+    );
+    let mut d = Driver::open(&config(&mcu.port, vec![joint(0, 400.0, false)]), &[0.0]);
+    let (fault, k) = run_until_fault(&mut d, 500, true);
+    let sent = d.hal.stats().steps;
+    for _ in 0..10 {
+        assert_eq!(d.tick(&[k as f64 * 0.05], true), Err(fault));
+    }
+    assert_eq!(d.hal.stats().steps, sent, "steps sent while faulted");
+    // The reset reconnects (a new hello) and motion resumes from where the
+    // joint was held.
+    d.hal.clear_fault().expect("the MCU answers again");
+    assert_eq!(d.hal.fault(), None);
+    d.ticks = 0;
+    for j in 1..=200 {
+        d.tick(&[(k + j) as f64 * 0.05], true)
+            .expect("running again");
+    }
+    let stats = d.hal.stats();
+    assert!(stats.steps >= 3900, "{stats:?}");
+}
+
+#[test]
 fn a_vanished_mcu_is_a_fault() {
     let mcu = Mcu::start("gone", &["--channels", "1", "--exit-after", "8"]);
     let mut d = Driver::open(&config(&mcu.port, vec![joint(0, 400.0, false)]), &[0.0]);

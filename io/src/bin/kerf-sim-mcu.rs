@@ -22,6 +22,8 @@
 //!   --corrupt-reply N   flip a CRC bit of the Nth reply (fault injection)
 //!   --mute-after N      answer only the first N frames (fault injection)
 //!   --exit-after N      exit after answering N frames (fault injection)
+//!   --persist           keep running when the host closes the port, for
+//!                       the host to reconnect (end it with a signal)
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -37,6 +39,7 @@ struct Args {
     corrupt_reply: Option<u64>,
     mute_after: Option<u64>,
     exit_after: Option<u64>,
+    persist: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -46,6 +49,7 @@ fn parse() -> Result<Args, String> {
         corrupt_reply: None,
         mute_after: None,
         exit_after: None,
+        persist: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -81,11 +85,12 @@ fn parse() -> Result<Args, String> {
             "--corrupt-reply" => a.corrupt_reply = Some(num(&flag, value()?)?),
             "--mute-after" => a.mute_after = Some(num(&flag, value()?)?),
             "--exit-after" => a.exit_after = Some(num(&flag, value()?)?),
+            "--persist" => a.persist = true,
             "-h" | "--help" => {
                 return Err(
                     "usage: kerf-sim-mcu [--channels N] [--clock-hz N] [--slots N] \
                      [--clock host|monotonic] [--offset TICKS] [--drift-ppm X] [--record PATH] \
-                     [--corrupt-reply N] [--mute-after N] [--exit-after N]"
+                     [--corrupt-reply N] [--mute-after N] [--exit-after N] [--persist]"
                         .into(),
                 )
             }
@@ -182,8 +187,10 @@ fn serve(args: Args) -> std::io::Result<()> {
             Err(e) => return Err(e),
         };
         // The host has the port open: drop our own serial-end descriptor so
-        // that its close reads as end of file here.
-        slave.take();
+        // that its close reads as end of file here (unless it may come back).
+        if !args.persist {
+            slave.take();
+        }
         for &b in &buf[..n] {
             let Some(frame) = deframer.push(b) else {
                 continue;

@@ -159,6 +159,18 @@ impl SimDrive {
                 if !mappable.contains(&((value >> 16) as u16)) {
                     return Err(cia402::ABORT_NOT_MAPPABLE);
                 }
+                // The objects mapped here are 16 or 32 bits, and a PDO
+                // holds 64 bits at most.
+                let bits = |e: &u32| e & 0xFF;
+                let others: u32 = map
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j != sub as usize - 1)
+                    .map(|(_, e)| bits(e))
+                    .sum();
+                if !matches!(bits(&value), 16 | 32) || others + bits(&value) > 64 {
+                    return Err(0x0604_0042);
+                }
                 let i = sub as usize - 1;
                 if i > map.len() {
                     return Err(cia402::ABORT_RANGE);
@@ -247,6 +259,11 @@ impl SimDrive {
             let mut at = 0;
             for &entry in &self.rpdo_map {
                 let bytes = ((entry & 0xFF) / 8) as usize;
+                if at + bytes > f.len as usize {
+                    // A PDO shorter than its mapping is ignored (CiA 301
+                    // would raise an EMCY "PDO length error").
+                    break;
+                }
                 let mut v = [0u8; 4];
                 v[..bytes].copy_from_slice(&f.data[at..at + bytes]);
                 let value = u32::from_le_bytes(v);

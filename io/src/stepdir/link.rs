@@ -123,6 +123,14 @@ impl Link {
             .timeout(READ_TIMEOUT)
             .open()
             .map_err(|e| dev(format!("cannot open serial port {}: {e}", config.port)))?;
+        // Answers to a previous connection's last frames may still wait in
+        // the port: they would look like answers to this one's.
+        port.clear(serialport::ClearBuffer::Input).map_err(|e| {
+            dev(format!(
+                "{}: cannot clear the input buffer: {e}",
+                config.port
+            ))
+        })?;
         let mut link = Link {
             port,
             port_name: config.port.clone(),
@@ -520,6 +528,37 @@ impl Link {
         let now = self.clock.now_ns();
         let _ = self.send(Command::Stop, now);
         let _ = self.port.flush();
+        // Take in the answers still coming (briefly; the MCU may be gone),
+        // so that a reconnection does not read them as its own.
+        let deadline = Instant::now() + Duration::from_millis(100);
+        while !self.inflight.is_empty() && Instant::now() < deadline {
+            if let Err(HalFault::Link { .. }) = self.receive_any() {
+                break;
+            }
+        }
+    }
+
+    /// Read answers without judging them (after a fault).
+    fn receive_any(&mut self) -> Result<(), HalFault> {
+        let mut buf = [0u8; 256];
+        let n = match self.port.read(&mut buf) {
+            Ok(0) => return Err(HalFault::Link { reason: "closed" }),
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => return Ok(()),
+            Err(_) => {
+                return Err(HalFault::Link {
+                    reason: "read error",
+                })
+            }
+        };
+        for &b in &buf[..n] {
+            if let Some(Ok(frame)) = self.deframer.push(b) {
+                if self.inflight.front().is_some_and(|f| f.seq == frame.seq) {
+                    self.inflight.pop_front();
+                }
+            }
+        }
+        Ok(())
     }
 }
 

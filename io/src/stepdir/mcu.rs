@@ -110,8 +110,11 @@ pub struct SimMcu {
 }
 
 impl SimMcu {
-    /// A simulated MCU; `Hello` must come first.
-    pub fn new(settings: McuSettings) -> SimMcu {
+    /// A simulated MCU; `Hello` must come first. At most
+    /// [`MAX_CHANNELS`] channels and one queue slot or more.
+    pub fn new(mut settings: McuSettings) -> SimMcu {
+        settings.channels = settings.channels.min(MAX_CHANNELS as u8);
+        settings.queue_slots = settings.queue_slots.max(1);
         SimMcu {
             settings,
             channels: [ChannelState::default(); MAX_CHANNELS],
