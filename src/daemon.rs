@@ -111,7 +111,7 @@ impl Daemon {
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         let (commands, command_queue) = rtrb::RingBuffer::new(64);
         let period = options.period_us as f64 * 1e-6;
-        let tick = ServoTick::new(
+        let mut tick = ServoTick::new(
             period,
             start,
             kinematics.clone(),
@@ -119,6 +119,16 @@ impl Daemon {
             consumer,
             command_queue,
         )?;
+        if let Some(shm) = &hal_config.shm {
+            let instance = shm
+                .instance
+                .clone()
+                .unwrap_or_else(|| description.name.clone());
+            let export = kerf_io::shm::ShmExport::start(&instance, &hal_config.pins)
+                .with_context(|| format!("{origin}: [hal.shm]"))?;
+            tick.export_to(export, kerf_io::PinBank::new(&hal_config.pins));
+            tracing::info!(%instance, "status and pins exported over shared memory");
+        }
         let (writer, reader) = seqlock(*tick.snapshot());
         let servo = ServoThread::spawn(tick, writer).context("cannot start the servo thread")?;
         tracing::info!(machine = %description.name, %origin, period_us = options.period_us, "servo running");

@@ -13,7 +13,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use kerf_interp::Position;
-use kerf_io::{Feedback, Hal, HalFault, Setpoints};
+use kerf_io::shm::{self, ShmExport, StatusFrame};
+use kerf_io::{Feedback, Hal, HalFault, PinBank, Setpoints};
 use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, SegmentKind, MAX_JOINTS};
 
 use crate::seqlock::Writer;
@@ -105,6 +106,13 @@ impl Snapshot {
     }
 }
 
+/// Status and pins published to shared memory every tick.
+struct Export {
+    shm: ShmExport,
+    pins: PinBank,
+    frame: StatusFrame,
+}
+
 /// Everything one servo tick touches.
 pub struct ServoTick {
     period: f64,
@@ -118,6 +126,7 @@ pub struct ServoTick {
     setpoints: Setpoints,
     feedback: Feedback,
     snapshot: Snapshot,
+    export: Option<Box<Export>>,
 }
 
 impl ServoTick {
@@ -149,7 +158,17 @@ impl ServoTick {
             setpoints,
             feedback: Feedback::default(),
             snapshot: Snapshot::at_rest(start, &joints[..n]),
+            export: None,
         })
+    }
+
+    /// Publish the status and `pins` through `shm` every tick from now on.
+    pub fn export_to(&mut self, shm: ShmExport, pins: PinBank) {
+        self.export = Some(Box::new(Export {
+            shm,
+            pins,
+            frame: StatusFrame::default(),
+        }));
     }
 
     /// The servo period in seconds.
@@ -240,6 +259,26 @@ impl ServoTick {
         }
         if snap.fault.is_some() {
             snap.moving = false;
+        }
+        if let Some(ex) = self.export.as_deref_mut() {
+            let f = &mut ex.frame;
+            f.tick = snap.ticks;
+            f.joint_count = n as u32;
+            f.state = match (snap.fault.is_some(), snap.moving) {
+                (true, _) => shm::state::FAULT,
+                (false, true) => shm::state::RUNNING,
+                (false, false) => shm::state::IDLE,
+            };
+            for i in 0..n {
+                let (cmd, fb) = (&self.setpoints.joints[i], &self.feedback.joints[i]);
+                f.position[i] = fb.position;
+                f.velocity[i] = fb.velocity;
+                f.following_error[i] = cmd.position - fb.position;
+            }
+            f.line = snap.line;
+            f.feed_override = snap.feed_override;
+            f.fault = snap.fault.is_some() as u32;
+            ex.shm.exchange(f, &mut ex.pins);
         }
         &self.snapshot
     }

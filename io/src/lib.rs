@@ -4,15 +4,32 @@
 //! [`Setpoints`] for this period and fills in the [`Feedback`] measured by the
 //! hardware. Backends must be real-time safe in [`Hal::exchange`]: no
 //! allocation, no locks, no blocking I/O (hardware that needs I/O buffers it
-//! and talks to its device from its own thread).
+//! and talks to its device from its own thread, reached through lock-free
+//! queues and atomics).
+//!
+//! Backends: [`sim`] (simulated drives), [`stepdir`] (step/dir through a
+//! microcontroller on a serial line), [`can`] (CiA 402 drives over CAN).
+//! The machine description wires each joint to one of them; [`build`]
+//! returns one [`Hal`] that routes every joint to its backend. [`pins`]
+//! holds the I/O pins M62–M68 act on; [`shm`] exports status and pins to
+//! other processes over iceoryx2 shared memory.
 //!
 //! This crate depends on none of kerf's other crates: it deals only in joint
 //! numbers, in the joint's own units (mm for linear drives).
 
+pub mod can;
+pub mod clock;
+pub mod config;
+pub mod pins;
+pub mod shm;
 pub mod sim;
+pub mod stepdir;
 
-use serde::Deserialize;
+mod fault;
+mod route;
 
+pub use config::{HalConfig, HalConfigError, ShmConfig};
+pub use pins::{PinBank, PinConfig};
 pub use sim::SimHal;
 
 /// Largest number of joints a backend serves (equals kerf-motion's MAX_JOINTS).
@@ -34,6 +51,7 @@ pub struct JointCommand {
 /// Setpoints for every joint for one period.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Setpoints {
+    /// Per-joint commands; the first `joint_count` are used.
     pub joints: [JointCommand; MAX_JOINTS],
     /// Drives enabled (false: outputs off, motors free or braked).
     pub enable: bool,
@@ -60,6 +78,7 @@ pub struct JointFeedback {
 /// Feedback from the hardware for one period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Feedback {
+    /// Per-joint feedback; the first `joint_count` are filled in.
     pub joints: [JointFeedback; MAX_JOINTS],
     /// Spindle motor current, A (0 where not measured).
     pub spindle_current: f64,
@@ -87,39 +106,29 @@ pub trait Hal: Send {
 
     /// Send this period's setpoints and read feedback. `period` is the servo
     /// period in seconds. Must not allocate, lock or block.
+    ///
+    /// Once a backend has returned a fault it keeps returning it, and moves
+    /// nothing, until [`Hal::clear_fault`] (the operator's reset).
     fn exchange(
         &mut self,
         period: f64,
         out: &Setpoints,
         feedback: &mut Feedback,
     ) -> Result<(), HalFault>;
-}
 
-/// Errors building a backend from its configuration.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum HalConfigError {
-    #[error("unknown HAL backend {0:?}; known backends: sim")]
-    UnknownBackend(String),
-    #[error("key `hal.{key}`: {reason}")]
-    Key { key: String, reason: String },
-}
-
-/// The `[hal]` table of a machine description.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct HalConfig {
-    /// Backend name: `sim`.
-    pub backend: String,
-    /// Settings for the `sim` backend.
-    #[serde(default)]
-    pub sim: sim::SimConfig,
-}
-
-/// Build the backend a configuration names, for `joints` joints starting at
-/// `initial` positions (mm).
-pub fn build(config: &HalConfig, initial: &[f64]) -> Result<Box<dyn Hal>, HalConfigError> {
-    match config.backend.as_str() {
-        "sim" => Ok(Box::new(SimHal::new(&config.sim, initial)?)),
-        other => Err(HalConfigError::UnknownBackend(other.to_string())),
+    /// The operator's fault reset: try to bring the hardware back after a
+    /// fault. Returns the fault that still stands if the hardware cannot be
+    /// brought back (e.g. the serial port is gone). The default, for
+    /// backends that cannot fault, does nothing. Not real-time: may block
+    /// while the hardware is re-initialised; call it with motion stopped.
+    fn clear_fault(&mut self) -> Result<(), HalFault> {
+        Ok(())
     }
+}
+
+/// Build the HAL a configuration describes for `initial.len()` joints
+/// starting at `initial` positions (mm): each joint goes to the backend the
+/// configuration wires it to (see [`HalConfig`]).
+pub fn build(config: &HalConfig, initial: &[f64]) -> Result<Box<dyn Hal>, HalConfigError> {
+    route::build(config, initial)
 }
