@@ -663,7 +663,7 @@ impl<'k> Planner<'k> {
             }
             Shape::Blend(b) => {
                 // Sample at the arc-length table's nodes; dκ/ds by differences.
-                const N: usize = 16;
+                const N: usize = crate::path::TABLE;
                 let frames: [crate::path::Frame; N + 1] =
                     std::array::from_fn(|k| b.frame_at_parameter(k as f64 / N as f64));
                 for k in 0..=N {
