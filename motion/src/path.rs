@@ -37,6 +37,9 @@ pub struct Arc {
     /// Centre in the plane's two coordinates.
     pub center: (f64, f64),
     pub radius: f64,
+    /// Radius at the end: programs give end points a hair off the circle,
+    /// and the arc then spirals, radius linear in angle, to end exactly there.
+    pub end_radius: f64,
     /// Angle of the start point, radians, measured from the first axis.
     pub start_angle: f64,
     /// Signed sweep, radians: positive counter-clockwise (G3).
@@ -105,6 +108,58 @@ impl Line {
 }
 
 impl Arc {
+    /// The arc a program asks for: from `start` to `end` (machine
+    /// coordinates) about `center` (coordinates on the plane's first and
+    /// second axes, indices `plane`), turning `turns` as LinuxCNC counts it:
+    /// positive counter-clockwise seen from the plane's normal, magnitude 1
+    /// plus the number of extra full turns. Start equal to end in the plane
+    /// is a full circle.
+    pub fn from_program(
+        start: &Vec9,
+        end: &Vec9,
+        plane: (usize, usize),
+        center: (f64, f64),
+        turns: i32,
+    ) -> Arc {
+        let (a, b) = plane;
+        let a0 = (start[b] - center.1).atan2(start[a] - center.0);
+        let a1 = (end[b] - center.1).atan2(end[a] - center.0);
+        let tau = 2.0 * std::f64::consts::PI;
+        let extra = (turns.unsigned_abs().max(1) - 1) as f64 * tau;
+        let same = (start[a] - end[a]).abs() < 1e-12 && (start[b] - end[b]).abs() < 1e-12;
+        let sweep = if turns >= 0 {
+            let mut d = a1 - a0;
+            while d <= 0.0 && !(same && d == 0.0) {
+                d += tau;
+            }
+            if same {
+                d = tau;
+            }
+            d + extra
+        } else {
+            let mut d = a1 - a0;
+            while d >= 0.0 && !(same && d == 0.0) {
+                d -= tau;
+            }
+            if same {
+                d = -tau;
+            }
+            d - extra
+        };
+        let radius = ((start[a] - center.0).powi(2) + (start[b] - center.1).powi(2)).sqrt();
+        let end_radius = ((end[a] - center.0).powi(2) + (end[b] - center.1).powi(2)).sqrt();
+        Arc {
+            plane,
+            center,
+            radius,
+            end_radius,
+            start_angle: a0,
+            sweep,
+            start: *start,
+            end: *end,
+        }
+    }
+
     fn axial_delta(&self) -> Vec9 {
         let mut d: Vec9 = std::array::from_fn(|i| self.end[i] - self.start[i]);
         d[self.plane.0] = 0.0;
@@ -117,7 +172,7 @@ impl Arc {
     pub fn length(&self) -> f64 {
         let d = self.axial_delta();
         let xyz_axial: f64 = d[..3].iter().map(|x| x * x).sum();
-        let in_plane = self.radius * self.sweep.abs();
+        let in_plane = (self.radius + self.end_radius) / 2.0 * self.sweep.abs();
         (in_plane * in_plane + xyz_axial).sqrt()
     }
 }
@@ -427,10 +482,15 @@ impl Shape {
         };
         let theta = a.start_angle + a.sweep * f;
         let (sin, cos) = theta.sin_cos();
+        let r = a.radius + (a.end_radius - a.radius) * f;
         let axial = a.axial_delta();
         let mut p: Vec9 = std::array::from_fn(|i| a.start[i] + axial[i] * f);
-        p[a.plane.0] = a.center.0 + a.radius * cos;
-        p[a.plane.1] = a.center.1 + a.radius * sin;
+        p[a.plane.0] = a.center.0 + r * cos;
+        p[a.plane.1] = a.center.1 + r * sin;
+        if f >= 1.0 {
+            // End exactly where the program said.
+            p = a.end;
+        }
         if len == 0.0 {
             return Frame {
                 point: p,
@@ -438,14 +498,15 @@ impl Shape {
                 curvature: [0.0; 9],
             };
         }
-        // dθ/ds = sweep / len; the axial part moves at axial / len.
+        // dθ/ds = w, dr/ds = dr; the axial part moves at axial / len.
         let w = a.sweep / len;
+        let dr = (a.end_radius - a.radius) / len;
         let mut t: Vec9 = std::array::from_fn(|i| axial[i] / len);
-        t[a.plane.0] = -a.radius * sin * w;
-        t[a.plane.1] = a.radius * cos * w;
+        t[a.plane.0] = dr * cos - r * sin * w;
+        t[a.plane.1] = dr * sin + r * cos * w;
         let mut k = [0.0; 9];
-        k[a.plane.0] = -a.radius * cos * w * w;
-        k[a.plane.1] = -a.radius * sin * w * w;
+        k[a.plane.0] = -2.0 * dr * w * sin - r * cos * w * w;
+        k[a.plane.1] = 2.0 * dr * w * cos - r * sin * w * w;
         Frame {
             point: p,
             tangent: t,
@@ -479,6 +540,7 @@ mod tests {
             plane: (0, 1),
             center: (0.0, 0.0),
             radius: 10.0,
+            end_radius: 10.0,
             start_angle: 0.0,
             sweep: std::f64::consts::FRAC_PI_2,
             start: v(10.0, 0.0, 0.0),
@@ -504,6 +566,44 @@ mod tests {
                 assert!((d1[i] - f.tangent[i]).abs() < 1e-6);
                 assert!((d2[i] - f.curvature[i]).abs() < 1e-4);
             }
+        }
+    }
+
+    #[test]
+    fn arcs_from_programs_sweep_as_linuxcnc_counts_turns() {
+        use std::f64::consts::PI;
+        let (s, e) = (v(10.0, 0.0, 0.0), v(0.0, 10.0, 0.0));
+        let sweep = |turns| Arc::from_program(&s, &e, (0, 1), (0.0, 0.0), turns).sweep;
+        assert!((sweep(1) - PI / 2.0).abs() < 1e-12, "G3 quarter");
+        assert!(
+            (sweep(-1) + 3.0 * PI / 2.0).abs() < 1e-12,
+            "G2 the long way"
+        );
+        assert!((sweep(2) - (PI / 2.0 + 2.0 * PI)).abs() < 1e-12, "G3 P2");
+        let full = |turns| Arc::from_program(&s, &s, (0, 1), (0.0, 0.0), turns).sweep;
+        assert!((full(1) - 2.0 * PI).abs() < 1e-12 && (full(-3) + 6.0 * PI).abs() < 1e-12);
+        // G18 is the ZX plane: first axis Z, second X; counter-clockwise
+        // seen from +Y takes +Z towards +X.
+        let zx = Arc::from_program(&v(0.0, 0.0, 5.0), &v(5.0, 0.0, 0.0), (2, 0), (0.0, 0.0), 1);
+        assert!((zx.sweep - PI / 2.0).abs() < 1e-12);
+        let mid = Shape::Arc(zx).point(Shape::Arc(zx).length() / 2.0);
+        let r = 5.0 / 2f64.sqrt();
+        assert!((mid[0] - r).abs() < 1e-12 && (mid[2] - r).abs() < 1e-12 && mid[1] == 0.0);
+    }
+
+    #[test]
+    fn an_arc_ending_off_its_circle_spirals_to_its_exact_end() {
+        // End radius 10.002 against a start radius of 10 (a program rounding).
+        let e = v(0.0, 10.002, 0.0);
+        let arc = Arc::from_program(&v(10.0, 0.0, 0.0), &e, (0, 1), (0.0, 0.0), 1);
+        let shape = Shape::Arc(arc);
+        assert_eq!(shape.end(), e);
+        let half = shape.point(shape.length() / 2.0);
+        assert!(((half[0].powi(2) + half[1].powi(2)).sqrt() - 10.001).abs() < 1e-9);
+        let (d1, _) = numeric(&shape, shape.length() / 3.0);
+        let f = shape.frame(shape.length() / 3.0);
+        for i in 0..3 {
+            assert!((d1[i] - f.tangent[i]).abs() < 1e-6);
         }
     }
 

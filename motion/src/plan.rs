@@ -881,6 +881,7 @@ mod tests {
             plane: (0, 1),
             center: (0.0, 0.0),
             radius: 10.0,
+            end_radius: 10.0,
             start_angle: 0.0,
             sweep: std::f64::consts::PI,
             start: [10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
