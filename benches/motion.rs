@@ -8,7 +8,8 @@
 //! forward/backward pass on a fine discretisation of the *programmed*
 //! polyline with only velocity and acceleration limits (no jerk limit), and
 //! corner speeds capped by the largest arc that fits within the path
-//! tolerance. Any trajectory that respects the machine's limits and the
+//! tolerance, driven by the largest acceleration the axes allow along the
+//! corner's normal (min over axes of A_i / |n_i|). Any trajectory that respects the machine's limits and the
 //! tolerance takes at least that long.
 
 use std::time::Instant;
@@ -75,12 +76,14 @@ fn lower_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> f64 {
             limits[i] = (spec.limits.max_velocity, spec.limits.max_acceleration);
         }
     }
-    let a_norm = limits
-        .iter()
-        .map(|l| l.1 * l.1)
-        .filter(|x| x.is_finite())
-        .sum::<f64>()
-        .sqrt();
+    // The largest acceleration along a unit direction n with every axis
+    // within its limit: min over axes of A_i / |n_i|.
+    let along = |n: &[f64; 3]| {
+        (0..3)
+            .filter(|&i| n[i].abs() > 1e-12)
+            .map(|i| limits[i].1 / n[i].abs())
+            .fold(f64::INFINITY, f64::min)
+    };
     // Moves: (start, end, speed cap).
     let mut moves: Vec<([f64; 3], [f64; 3], f64)> = Vec::new();
     let mut feed = 0.0;
@@ -143,7 +146,11 @@ fn lower_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> f64 {
                     let half = theta / 2.0;
                     let r_tol = tolerance / (1.0 / half.cos() - 1.0);
                     let r_len = len.min(len2) / 2.0 / half.tan();
-                    (a_norm * r_tol.min(r_len)).sqrt()
+                    // Centripetal acceleration points along t2 − t1.
+                    let d: [f64; 3] = std::array::from_fn(|i| t2[i] - t[i]);
+                    let dn = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    let n: [f64; 3] = std::array::from_fn(|i| d[i] / dn);
+                    (along(&n) * r_tol.min(r_len)).sqrt()
                 }
             }
         };

@@ -122,6 +122,10 @@ pub struct PlannerConfig {
     /// Jerk-limited (S-curve) profiles, or acceleration-limited
     /// (trapezoidal) ones for comparison.
     pub jerk_limited: bool,
+    /// Share of each axis's acceleration given to the centripetal part on
+    /// curves (0 to 1); the rest is left for speeding up and slowing down
+    /// along them.
+    pub centripetal_share: f64,
 }
 
 impl Default for PlannerConfig {
@@ -130,6 +134,7 @@ impl Default for PlannerConfig {
             period: 0.001,
             mode: PathMode::Blend { tolerance: 0.01 },
             jerk_limited: true,
+            centripetal_share: 0.5,
         }
     }
 }
@@ -690,13 +695,17 @@ impl<'k> Planner<'k> {
             let Some(l) = self.limits[i] else { continue };
             if t_max[i] > 0.0 {
                 v = v.min(l.max_velocity / t_max[i]);
-                let share = if curved { 0.5 } else { 1.0 };
+                let share = if curved {
+                    1.0 - self.config.centripetal_share
+                } else {
+                    1.0
+                };
                 a = a.min(share * l.max_acceleration / t_max[i]);
                 let jshare = if curved { 1.0 / 3.0 } else { 1.0 };
                 j = j.min(jshare * l.max_jerk / t_max[i]);
             }
             if k_max[i] > 0.0 {
-                v = v.min((0.5 * l.max_acceleration / k_max[i]).sqrt());
+                v = v.min((self.config.centripetal_share * l.max_acceleration / k_max[i]).sqrt());
             }
             if dk_max[i] > 0.0 && l.max_jerk.is_finite() {
                 v = v.min((l.max_jerk / 3.0 / dk_max[i]).cbrt());
