@@ -99,26 +99,39 @@ fn plan_plot_writes_an_svg() {
     assert!(human.contains("cycle time") && human.contains("axis X"));
 }
 
-#[test]
-fn joints_stay_within_their_limits_on_the_o_x_glide() {
-    // The crossed O-X machine with slow sliders, so the joints rather than
-    // the axes bind: near the bottom of the travel a slider moves about 8
-    // times as fast as the tool moves in Z.
+/// Plan `program` on the embedded machine `name` with every joint's speed
+/// limit lowered to `joint_speed`, so the joints rather than the axes bind,
+/// and return the largest joint velocity use and the largest limit use of
+/// anything, both measured by finite differences of the sampled trajectory.
+fn plan_with_slow_joints(name: &str, joint_speed: f64, program_text: &str) -> (f64, f64) {
     let dir = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/machines/oxglide-x.toml"
+    let text = std::fs::read_to_string(format!(
+        "{}/machines/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap();
-    let slow = text.replace("max_velocity = 500.0", "max_velocity = 60.0");
-    assert_ne!(slow, text, "the joint limits to lower are in the file");
-    let machine = dir.path().join("slow-ox.toml");
-    std::fs::write(&machine, slow).unwrap();
-    let p = program(
-        &dir,
-        "ox.ngc",
-        "G21 G90\nG1 X250 Z-350 F3000\nG1 Z-295\nG1 X200 Z-340\nG1 X320\nM2\n",
+    // Only the [[joints]] tables: axis limits stay as they are.
+    let split = text.find("[[joints]]").expect("the machine has joints");
+    let (axes, joints) = text.split_at(split);
+    let slowed: String = joints
+        .lines()
+        .map(|l| {
+            if l.trim_start().starts_with("max_velocity") {
+                format!("max_velocity = {joint_speed}")
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(
+        slowed.trim(),
+        joints.trim(),
+        "the joint limits to lower are in the file"
     );
+    let machine = dir.path().join(format!("slow-{name}.toml"));
+    std::fs::write(&machine, format!("{axes}{slowed}\n")).unwrap();
+    let p = program(&dir, "p.ngc", program_text);
     let out = kerf(&["plan", &p, "--machine", machine.to_str().unwrap(), "--json"]);
     assert!(
         out.status.success(),
@@ -132,14 +145,44 @@ fn joints_stay_within_their_limits_on_the_o_x_glide() {
         .iter()
         .map(|j| j["velocity"].as_f64().unwrap())
         .fold(0.0, f64::max);
-    // Measured by finite differences of the sampled joint positions.
-    assert!(
-        joint_velocity <= 1.0 + 1e-6,
-        "joint velocity use {joint_velocity}"
+    (joint_velocity, json["max_limit_ratio"].as_f64().unwrap())
+}
+
+#[test]
+fn joints_stay_within_their_limits_on_the_o_x_glide() {
+    // Near the bottom of the travel a slider moves about 8 times as fast as
+    // the tool moves in Z.
+    let (joint, all) = plan_with_slow_joints(
+        "oxglide-x",
+        60.0,
+        "G21 G90\nG1 X250 Z-350 F3000\nG1 Z-295\nG1 X200 Z-340\nG1 X320\nM2\n",
+    );
+    assert!(joint <= 1.0 + 1e-6, "joint velocity use {joint}");
+    assert!(joint > 0.9, "the slow joints should bind: use {joint}");
+    assert!(all <= 1.0 + 1e-6, "limit use {all}");
+
+    let (joint, all) = plan_with_slow_joints(
+        "oxglide-o",
+        30.0,
+        "G21 G90\nG1 X210 Z-354 F3000\nG1 X295 Z-341\nG1 X210\nG1 Z-350\nM2\n",
     );
     assert!(
-        joint_velocity > 0.9,
-        "the slow joints should bind: use {joint_velocity}"
+        joint <= 1.0 + 1e-6 && joint > 0.9,
+        "extended form: joint velocity use {joint}"
     );
-    assert!(json["max_limit_ratio"].as_f64().unwrap() <= 1.0 + 1e-6);
+    assert!(all <= 1.0 + 1e-6, "extended form: limit use {all}");
+}
+
+#[test]
+fn joints_stay_within_their_limits_on_the_5_axis_platform() {
+    // Tool-centre-point moves with tilt: the X-Y table swings under the tool
+    // tip while the actuators tilt the platform.
+    let (joint, all) = plan_with_slow_joints(
+        "rfmt5",
+        40.0,
+        "G21 G90\nG1 X200 Y150 Z100 A20 B-15 F3000\nG1 A-20 B20\nG1 X100 Y50 Z150 A0 B0\nM2\n",
+    );
+    assert!(joint <= 1.0 + 1e-6, "joint velocity use {joint}");
+    assert!(joint > 0.9, "the slow joints should bind: use {joint}");
+    assert!(all <= 1.0 + 1e-6, "limit use {all}");
 }

@@ -143,93 +143,89 @@ struct Ahead {
     /// Distance to the first point where the speed must be zero, if within
     /// reach, with the lowest acceleration and jerk limits up to it.
     zero: Option<(f64, f64, f64)>,
+    /// The first speed cap that cannot be met, when that is what failed.
+    binding: Option<Binding>,
 }
 
 impl Ahead {
-    fn clear() -> Ahead {
-        Ahead {
-            ok: true,
-            zero: None,
-        }
-    }
+    /// Failed on something other than a speed cap (easing an acceleration).
     fn blocked() -> Ahead {
         Ahead {
             ok: false,
             zero: None,
-        }
-    }
-    fn zero(ok: bool, dist: f64, amax: f64, jmax: f64) -> Ahead {
-        Ahead {
-            ok,
-            zero: Some((dist.max(0.0), amax, jmax)),
+            binding: None,
         }
     }
 }
 
-/// A jerk-limited braking profile to rest: jerk towards a peak
+/// A jerk-limited profile down to speed `v1`: jerk towards a peak
 /// deceleration, constant deceleration, then jerk +J back to zero
-/// acceleration exactly as the speed reaches zero. Sampled exactly each
-/// period, so the limits hold between samples too.
+/// acceleration exactly as the speed reaches `v1`, after which the speed
+/// stays `v1`. Sampled exactly each period, so the limits hold between
+/// samples too, and the profile arrives at its distance with zero
+/// acceleration, whatever the period.
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Brake {
     v0: f64,
     a0: f64,
+    v1: f64,
     /// (jerk, duration) of the three phases.
     phases: [(f64, f64); 3],
     /// Time into the profile, s.
     t: f64,
+    /// A feed-hold stop (ends when the hold is released).
+    hold: bool,
 }
 
 impl Brake {
-    /// The profile from (v0, a0) with peak deceleration `peak`, if it stops
-    /// without the speed going negative.
-    fn with_peak(v0: f64, a0: f64, peak: f64, jmax: f64) -> Option<Brake> {
+    /// The profile from (v0, a0) to v1 with peak deceleration `peak`, if
+    /// the constant phase does not come out negative.
+    fn with_peak(v0: f64, a0: f64, v1: f64, peak: f64, jmax: f64) -> Option<Brake> {
         let j1 = if a0 >= -peak { -jmax } else { jmax };
         let t1 = (a0 + peak).abs() / jmax;
-        let v1 = v0 + (a0 - peak) / 2.0 * t1;
+        let after = v0 + (a0 - peak) / 2.0 * t1;
         let t3 = peak / jmax;
-        let t2 = (v1 - peak * t3 / 2.0) / peak;
+        let t2 = (after - peak * t3 / 2.0 - v1) / peak;
         if t2.is_nan() || t2 < -1e-12 {
             return None;
         }
         Some(Brake {
             v0,
             a0,
+            v1,
             phases: [(j1, t1), (0.0, t2.max(0.0)), (jmax, t3)],
             t: 0.0,
+            hold: false,
         })
     }
 
     /// The largest usable peak deceleration: the limit, or the peak at which
-    /// the constant-deceleration phase vanishes.
-    fn max_peak(v0: f64, a0: f64, amax: f64, jmax: f64) -> f64 {
-        amax.min((jmax * v0.max(0.0) + a0 * a0 / 2.0).sqrt())
-            .max(1e-9)
+    /// the constant-deceleration phase vanishes. None if even easing the
+    /// acceleration off at once ends below v1 (nothing binds).
+    fn max_peak(v0: f64, a0: f64, v1: f64, amax: f64, jmax: f64) -> Option<f64> {
+        let square = jmax * (v0 - v1) + a0 * a0 / 2.0;
+        (square > 0.0).then(|| amax.min(square.sqrt()))
     }
 
-    /// The shortest stop from (v0, a0).
-    fn shortest(v0: f64, a0: f64, amax: f64, jmax: f64) -> Brake {
-        let peak = Self::max_peak(v0, a0, amax, jmax);
-        Self::with_peak(v0, a0, peak, jmax).unwrap_or(Brake {
-            v0,
-            a0,
-            phases: [(0.0, 0.0); 3],
-            t: 0.0,
-        })
+    /// The shortest profile from (v0, a0) down to v1, if there is one.
+    fn shortest(v0: f64, a0: f64, v1: f64, amax: f64, jmax: f64) -> Option<Brake> {
+        let peak = Self::max_peak(v0, a0, v1, amax, jmax)?;
+        Self::with_peak(v0, a0, v1, peak, jmax)
     }
 
-    /// The stop from (v0, a0) that ends `distance` ahead, or the shortest one
-    /// if that is longer. Longer stops use gentler peaks: bisect on the peak.
-    fn within(v0: f64, a0: f64, distance: f64, amax: f64, jmax: f64) -> Brake {
-        let shortest = Self::shortest(v0, a0, amax, jmax);
+    /// The profile from (v0, a0) down to v1 that ends `distance` ahead, or
+    /// the shortest one if that is longer. Longer ones use gentler peaks:
+    /// bisect on the peak.
+    fn within(v0: f64, a0: f64, v1: f64, distance: f64, amax: f64, jmax: f64) -> Option<Brake> {
+        let shortest = Self::shortest(v0, a0, v1, amax, jmax)?;
         if shortest.length() >= distance {
-            return shortest;
+            return Some(shortest);
         }
-        let (mut lo, mut hi) = (0.0, Self::max_peak(v0, a0, amax, jmax));
+        let (mut lo, mut hi) = (0.0, Self::max_peak(v0, a0, v1, amax, jmax)?);
         let mut best = shortest;
         for _ in 0..60 {
             let mid = (lo + hi) / 2.0;
-            match Self::with_peak(v0, a0, mid, jmax) {
+            match Self::with_peak(v0, a0, v1, mid, jmax) {
                 Some(b) if b.length() >= distance => {
                     lo = mid;
                     best = b;
@@ -237,12 +233,16 @@ impl Brake {
                 _ => hi = mid,
             }
         }
-        // `best` ends at or just past `distance`; the playback clamps there.
-        best
+        Some(best)
     }
 
     fn duration(&self) -> f64 {
         self.phases.iter().map(|p| p.1).sum()
+    }
+
+    /// Peak deceleration, mm/s².
+    fn peak(&self) -> f64 {
+        self.phases[2].1 * self.phases[2].0
     }
 
     /// (distance, speed, acceleration) at time `t` into the profile.
@@ -255,20 +255,38 @@ impl Brake {
             v += a * h + j * h * h / 2.0;
             a += j * h;
             left -= h;
-            if left <= 0.0 {
-                break;
-            }
         }
         if t >= self.duration() {
-            (s, 0.0, 0.0)
+            // Past the end: on at v1.
+            (s + self.v1 * left, self.v1, 0.0)
         } else {
             (s, v.max(0.0), a)
         }
     }
 
+    /// Distance to the end of the ramps.
     fn length(&self) -> f64 {
         self.at(self.duration()).0
     }
+}
+
+/// A speed cap the look ahead found that the motion cannot meet from the
+/// state asked about.
+#[derive(Clone, Copy, Debug)]
+struct Binding {
+    /// Distance from the state asked about to the cap.
+    dist: f64,
+    /// The capped speed there.
+    limit: f64,
+    /// Lowest acceleration and jerk limits up to it.
+    amax: f64,
+    jmax: f64,
+}
+
+/// Whether motion at speed `v` and acceleration `a` stays within `cap`
+/// even if the acceleration is eased off at once with jerk `jmax`.
+fn within_cap(v: f64, a: f64, cap: f64, jmax: f64) -> bool {
+    v + a.max(0.0).powi(2) / (2.0 * jmax) <= cap * (1.0 + 1e-12)
 }
 
 impl Executor {
@@ -375,52 +393,136 @@ impl Executor {
     /// acceleration down to it before it starts. Returns whether they can,
     /// and the distance to the first point where the speed must be zero.
     fn look_ahead(&self, q: View, head: usize, s_head: f64, v: f64, a: f64) -> Ahead {
+        self.look_ahead_except(q, head, s_head, v, a, None)
+    }
+
+    /// [`look_ahead`](Self::look_ahead), not counting a cap at (distance,
+    /// speed) `except` as failing: the target of the profile being played
+    /// back, which meets it exactly and may fail it only by rounding.
+    fn look_ahead_except(
+        &self,
+        q: View,
+        head: usize,
+        s_head: f64,
+        v: f64,
+        a: f64,
+        except: Option<(f64, f64)>,
+    ) -> Ahead {
         let first = q.get(head).expect("caller checked");
         let mut amax = first.max_acceleration;
         let mut jmax = first.max_jerk;
         let mut dist = -s_head;
         let mut stop_reach = braking_distance(v, a, 0.0, amax, jmax);
-        let mut k = head;
-        loop {
-            let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
-                // The queue ends, or a dwell or stop: speed must be zero here.
-                let ok = braking_distance(v, a, 0.0, amax, jmax) <= dist.max(0.0) + 1e-12;
-                return Ahead::zero(ok, dist, amax, jmax);
+        let excepted = |dist: f64, limit: f64| {
+            except.is_some_and(|(d, l)| {
+                (d - dist).abs() <= 1e-6 * dist.abs().max(1.0)
+                    && (l - limit).abs() <= 1e-9 * limit.max(1.0)
+            })
+        };
+        // Of the caps that cannot be met, the one demanding the hardest
+        // braking: meeting it slows the motion enough for the others. A cap
+        // out of reach even at full braking ranks above all, by how far.
+        // A cap no lower than an earlier one is met by meeting that one
+        // (which the look ahead enforces when it binds), so only caps lower
+        // than every cap before them are ranked.
+        //
+        // A profile brakes under one acceleration limit, the lowest up to
+        // its target; so a later cap displaces the aim only when no segment
+        // with a much lower limit (under half) lies between them. Otherwise the earlier cap is
+        // met first, slowly enough, and the later one dealt with from there.
+        let mut worst: Option<(f64, Binding)> = None;
+        let mut fail = |b: Binding| {
+            let severity = match Brake::within(v, a, b.limit, b.dist, b.amax, b.jmax) {
+                Some(p) if p.length() <= b.dist + 1e-9 => p.peak(),
+                Some(p) => 1e12 + (p.length() - b.dist),
+                None => 0.0,
             };
-            if dist > stop_reach {
-                return Ahead::clear();
-            }
-            if k > head && a > seg.max_acceleration {
-                let t = (a - seg.max_acceleration) / jmax;
-                let ease = if t > 0.0 {
-                    v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0
-                } else {
-                    0.0
-                };
-                if ease > dist + 1e-12 {
-                    return Ahead::blocked();
+            let displaces = match worst {
+                None => true,
+                Some((w, first)) => {
+                    b.amax >= first.amax / 2.0 && b.jmax >= first.jmax / 2.0 && severity > w
                 }
+            };
+            if displaces {
+                worst = Some((severity, b));
             }
-            if seg.max_acceleration < amax || seg.max_jerk < jmax {
-                amax = amax.min(seg.max_acceleration);
-                jmax = jmax.min(seg.max_jerk);
-                stop_reach = braking_distance(v, a, 0.0, amax, jmax);
-            }
-            dist += seg.length;
-            let next_cap = q
-                .get(k + 1)
-                .map(|n| if n.is_motion() { self.cap(n) } else { 0.0 })
-                .unwrap_or(0.0);
-            let limit = seg.exit_velocity.min(self.cap(seg)).min(next_cap);
-            if limit == 0.0 {
-                let ok = braking_distance(v, a, 0.0, amax, jmax) <= dist.max(0.0) + 1e-12;
-                return Ahead::zero(ok, dist, amax, jmax);
-            }
-            let crest = v + a.max(0.0).powi(2) / (2.0 * jmax);
-            if limit < crest && braking_distance(v, a, limit, amax, jmax) > dist + 1e-12 {
-                return Ahead::blocked();
+        };
+        // Caps within rounding of each other are one cap.
+        let mut lowest = f64::INFINITY;
+        let mut k = head;
+        let zero = loop {
+            let zero_here = match q.get(k).filter(|s| s.is_motion()) {
+                // The queue ends, or a dwell or stop: speed must be zero here.
+                None => true,
+                Some(seg) => {
+                    if dist > stop_reach {
+                        break None;
+                    }
+                    if k > head && a > seg.max_acceleration {
+                        let t = (a - seg.max_acceleration) / jmax;
+                        let ease = if t > 0.0 {
+                            v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0
+                        } else {
+                            0.0
+                        };
+                        if ease > dist + 1e-12 {
+                            return Ahead::blocked();
+                        }
+                    }
+                    if seg.max_acceleration < amax || seg.max_jerk < jmax {
+                        amax = amax.min(seg.max_acceleration);
+                        jmax = jmax.min(seg.max_jerk);
+                        stop_reach = braking_distance(v, a, 0.0, amax, jmax);
+                    }
+                    dist += seg.length;
+                    let next_cap = q
+                        .get(k + 1)
+                        .map(|n| if n.is_motion() { self.cap(n) } else { 0.0 })
+                        .unwrap_or(0.0);
+                    let limit = seg.exit_velocity.min(self.cap(seg)).min(next_cap);
+                    // A cap behind the position asked about is past.
+                    if dist > 0.0 && limit > 0.0 && limit < lowest * (1.0 - 1e-9) {
+                        lowest = limit;
+                        // Acceleration left at the junction is eased off in
+                        // the next segment, under its jerk limit.
+                        let jn = q
+                            .get(k + 1)
+                            .filter(|n| n.is_motion())
+                            .map_or(jmax, |n| jmax.min(n.max_jerk));
+                        let crest = v + a.max(0.0).powi(2) / (2.0 * jn);
+                        if limit < crest
+                            && braking_distance(v, a, limit, amax, jn) > dist + 1e-9
+                            && !excepted(dist, limit)
+                        {
+                            fail(Binding {
+                                dist,
+                                limit,
+                                amax,
+                                jmax: jn,
+                            });
+                        }
+                    }
+                    limit == 0.0
+                }
+            };
+            if zero_here {
+                let dist = dist.max(0.0);
+                if braking_distance(v, a, 0.0, amax, jmax) > dist + 1e-9 && !excepted(dist, 0.0) {
+                    fail(Binding {
+                        dist,
+                        limit: 0.0,
+                        amax,
+                        jmax,
+                    });
+                }
+                break Some((dist, amax, jmax));
             }
             k += 1;
+        };
+        Ahead {
+            ok: worst.is_none(),
+            zero,
+            binding: worst.map(|w| w.1),
         }
     }
 
@@ -502,6 +604,14 @@ impl Executor {
             }
             amax = amax.min(seg.max_acceleration);
             jmax = jmax.min(seg.max_jerk);
+            // The motion stops before a segment it may not enter moving.
+            let next_cap = q
+                .get(k + 1)
+                .filter(|n| n.is_motion())
+                .map_or(0.0, |n| self.cap(n));
+            if seg.exit_velocity == 0.0 || next_cap == 0.0 {
+                break;
+            }
             start += seg.length;
             k += 1;
         }
@@ -512,46 +622,32 @@ impl Executor {
     fn advance(&mut self, q: View, head: usize, dt: f64, consumed: &mut usize) {
         let seg = q.get(head).expect("caller checked");
         let (amax, jmax) = self.period_limits(q, head, dt);
+        let shaped = jmax.is_finite();
 
-        // A stop being played back goes on while its end is still where the
-        // motion must stop (feed hold: while the hold lasts).
-        if let Some(brake) = self.brake {
-            let keep = if self.hold {
-                true
-            } else {
-                let left = brake.length() - brake.at(brake.t).0;
-                let zero = self.look_ahead(q, head, self.s, self.v, self.a).zero;
-                zero.is_some_and(|(d, _, _)| d <= left + 1e-9)
-            };
-            if !keep {
-                self.brake = None;
+        // Feed hold: the shortest stop, played back until released.
+        if self.hold && shaped {
+            if !self.brake.is_some_and(|b| b.hold) {
+                if self.v == 0.0 && self.a == 0.0 {
+                    return;
+                }
+                if let Some(mut stop) = Brake::shortest(self.v, self.a, 0.0, amax, jmax) {
+                    stop.hold = true;
+                    self.brake = Some(stop);
+                }
+            }
+            if self.brake.is_some() {
+                return self.play(q, head, dt, consumed);
             }
         }
-        if self.brake.is_none() && self.hold && (self.v > 0.0 || self.a != 0.0) && jmax.is_finite()
-        {
-            self.brake = Some(Brake::shortest(self.v, self.a, amax, jmax));
-        }
-        if let Some(mut brake) = self.brake {
-            let (s0, _, _) = brake.at(brake.t);
-            brake.t += dt;
-            let (s1, v, a) = brake.at(brake.t);
-            self.brake = if brake.t >= brake.duration() {
-                None
-            } else {
-                Some(brake)
-            };
-            return self.travel(q, head, s1 - s0, v, a, consumed);
+        if self.brake.is_some_and(|b| b.hold) {
+            self.brake = None;
         }
 
         let target = self.cap(seg);
         // The last period of an acceleration ramp uses less than full jerk
         // and gains up to J·dt²/8 more speed than the continuous ramp; aim
         // that much low so a speed limit is never exceeded.
-        let margin = if jmax.is_finite() {
-            jmax * dt * dt / 8.0
-        } else {
-            0.0
-        };
+        let margin = if shaped { jmax * dt * dt / 8.0 } else { 0.0 };
         let aim = if target > self.v {
             (target - margin).max(self.v.min(target))
         } else {
@@ -567,9 +663,9 @@ impl Executor {
             let a = s.a + j * dt;
             (ds, v, a)
         };
-        let feasible = |j: f64, s: &Self| {
+        let ahead_of = |j: f64, s: &Self| {
             let (ds, v, a) = step(j, s);
-            s.look_ahead(q, head, s.s + ds.max(0.0), v.max(0.0), a).ok
+            (ds, s.look_ahead(q, head, s.s + ds.max(0.0), v.max(0.0), a))
         };
         let j_track = ((a_want - self.a) / dt).clamp(-jmax, jmax);
         let j_track = if j_track.is_finite() {
@@ -577,62 +673,100 @@ impl Executor {
         } else {
             (a_want - self.a) / dt
         };
-        // The least jerk that still lets the acceleration ease back to zero
-        // before the speed does (v′ ≥ a′²/2J): below it the machine would
-        // have to stop with a jump in acceleration.
-        let j_floor = if jmax.is_finite() {
-            let mut lo = -jmax;
-            let crashes = |j: f64| {
-                let (_, v, a) = step(j, self);
-                a < 0.0 && v < a * a / (2.0 * jmax)
-            };
-            if crashes(lo) && !crashes(j_track) {
-                let mut hi = j_track;
-                for _ in 0..24 {
-                    let mid = (lo + hi) / 2.0;
-                    if crashes(mid) {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
+        let (ds_track, ahead) = ahead_of(j_track, self);
+
+        if ahead.ok {
+            // Tracking is safe: an approach being played back is no longer
+            // needed (the cap rose, or more of the program arrived). In its
+            // last periods, finish it instead: tracking there would ride
+            // within the look ahead's rounding slack and arrive late.
+            if let Some(b) = self.brake {
+                let left = b.length() - b.at(b.t).0;
+                // A stop is kept until its point moves further away.
+                let stop_kept = b.v1 == 0.0
+                    && self
+                        .look_ahead(q, head, self.s, self.v, self.a)
+                        .zero
+                        .is_some_and(|(d, _, _)| d <= left + 1e-9);
+                if left > 10.0 * self.v * dt + 1e-9 && !stop_kept {
+                    self.brake = None;
+                } else {
+                    return self.play(q, head, dt, consumed);
                 }
-                lo = hi;
             }
-            lo.min(j_track)
-        } else {
-            (-amax - self.a) / dt
-        };
-        let mut j = j_track;
-        let (ds_track, v_track, a_track) = step(j_track, self);
-        let ahead = self.look_ahead(
-            q,
-            head,
-            self.s + ds_track.max(0.0),
-            v_track.max(0.0),
-            a_track,
-        );
-        if !ahead.ok && jmax.is_finite() {
-            // If the point where we must stop is what tracking would miss,
-            // start the stop that ends exactly there, from where we are.
-            if let Some((d, za, zj)) = self.look_ahead(q, head, self.s, self.v, self.a).zero {
-                if braking_distance(v_track.max(0.0), a_track, 0.0, za, zj) > d - ds_track.max(0.0)
-                {
-                    let brake = Brake::within(self.v, self.a, d, za, zj);
-                    self.brake = Some(brake);
-                    return self.advance(q, head, dt, consumed);
+        } else if shaped {
+            if let Some(p) = self.brake {
+                // Look before the leap: the profile's next state must meet
+                // every cap ahead but its own target; if another would fail,
+                // aim at that one instead, from here.
+                let t = p.t + dt;
+                let (s0, _, _) = p.at(p.t);
+                let (s1, v1, a1) = p.at(t);
+                let left = p.length() - s1;
+                let check =
+                    self.look_ahead_except(q, head, self.s + (s1 - s0), v1, a1, Some((left, p.v1)));
+                if let (false, Some(b)) = (check.ok, check.binding) {
+                    let dist = b.dist + (s1 - s0);
+                    self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
                 }
+                self.aim_past_end(q, head);
+            } else if let Some(b) = ahead
+                .binding
+                .filter(|_| within_cap(self.v, self.a, target, jmax))
+            {
+                // Approach the cap tracking would miss along a profile that
+                // reaches it exactly, with zero acceleration, from here (if
+                // the profile's crest stays within this segment's own cap).
+                let dist = b.dist + ds_track.max(0.0);
+                self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                self.aim_past_end(q, head);
+            }
+            // A profile never takes the speed over the segment's own cap,
+            // which the caps at segment ends do not cover.
+            if let Some(p) = self.brake {
+                let (_, v1, a1) = p.at(p.t + dt);
+                if !p.hold && !within_cap(v1, a1, target, p.phases[2].0) {
+                    self.brake = None;
+                }
+            }
+            if self.brake.is_some() {
+                return self.play(q, head, dt, consumed);
             }
         }
+        let mut j = j_track;
         if !ahead.ok {
-            // Above the floor, feasibility only improves as the jerk falls:
-            // take the largest feasible jerk, so the speed rides the braking
-            // curve rather than chattering between braking and tracking.
+            // The least jerk that still lets the acceleration ease back to
+            // zero before the speed does (v′ ≥ a′²/2J); above it
+            // feasibility only improves as the jerk falls: take the largest
+            // feasible jerk.
+            let j_floor = if shaped {
+                let mut lo = -jmax;
+                let crashes = |j: f64| {
+                    let (_, v, a) = step(j, self);
+                    a < 0.0 && v < a * a / (2.0 * jmax)
+                };
+                if crashes(lo) && !crashes(j_track) {
+                    let mut hi = j_track;
+                    for _ in 0..24 {
+                        let mid = (lo + hi) / 2.0;
+                        if crashes(mid) {
+                            lo = mid;
+                        } else {
+                            hi = mid;
+                        }
+                    }
+                    lo = hi;
+                }
+                lo.min(j_track)
+            } else {
+                (-amax - self.a) / dt
+            };
             let mut lo = j_floor;
-            if feasible(lo, self) {
+            if ahead_of(lo, self).1.ok {
                 let mut hi = j_track;
                 for _ in 0..16 {
                     let mid = (lo + hi) / 2.0;
-                    if feasible(mid, self) {
+                    if ahead_of(mid, self).1.ok {
                         lo = mid;
                     } else {
                         hi = mid;
@@ -665,6 +799,40 @@ impl Executor {
             a = 0.0;
         }
         self.travel(q, head, ds, v, a, consumed)
+    }
+
+    /// A profile ends at its target at its speed with zero acceleration;
+    /// if the caps after that cannot be met from there, aim at the one that
+    /// fails instead (a few times, for chains of caps).
+    fn aim_past_end(&mut self, q: View, head: usize) {
+        for _ in 0..4 {
+            let Some(p) = self.brake else { return };
+            let to_end = p.length() - p.at(p.t).0;
+            let after = self.look_ahead(q, head, self.s + to_end, p.v1, 0.0);
+            match (after.ok, after.binding) {
+                (false, Some(b)) => {
+                    let dist = b.dist + to_end;
+                    self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                }
+                _ => return,
+            }
+        }
+    }
+
+    /// One period of the profile being played back.
+    fn play(&mut self, q: View, head: usize, dt: f64, consumed: &mut usize) {
+        let Some(mut brake) = self.brake else { return };
+        let (s0, _, _) = brake.at(brake.t);
+        brake.t += dt;
+        let (s1, v, a) = brake.at(brake.t);
+        // Done once at the end of its ramps (a stop rests there; an approach
+        // goes on at its speed, and tracking takes over).
+        self.brake = if brake.t >= brake.duration() && !brake.hold {
+            None
+        } else {
+            Some(brake)
+        };
+        self.travel(q, head, s1 - s0, v, a, consumed)
     }
 
     /// Move `ds` along the queue from the head and take speed `v` and
@@ -925,6 +1093,95 @@ mod simulation {
             "blended {} ticks, exact stop {}",
             out.len(),
             stopping.len()
+        );
+    }
+
+    /// xorshift64*: a small seeded generator, so the test is repeatable.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    #[test]
+    fn random_programs_end_exactly_within_limits() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        for case in 0..40 {
+            let mut text = String::from("G21 G90\n");
+            let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
+            for _ in 0..30 {
+                let kind = rng.next();
+                // Long moves, tiny ones, shallow and sharp corners, reversals.
+                let len = if rng.next() < 0.3 {
+                    0.01 + rng.next() * 0.2
+                } else {
+                    1.0 + rng.next() * 40.0
+                };
+                let angle = rng.next() * std::f64::consts::TAU;
+                x = (x + len * angle.cos()).clamp(-400.0, 400.0);
+                y = (y + len * angle.sin()).clamp(-400.0, 400.0);
+                if rng.next() < 0.15 {
+                    z = -rng.next() * 10.0;
+                }
+                // The program carries 4 decimals; so does the expectation.
+                let round = |v: f64| (v * 1e4).round() / 1e4;
+                (x, y, z) = (round(x), round(y), round(z));
+                let feed = 300.0 + rng.next() * 9000.0;
+                let code = if kind < 0.2 {
+                    "G0".to_string()
+                } else {
+                    format!("G1 F{feed:.0}")
+                };
+                text += &format!("{code} X{x:.4} Y{y:.4} Z{z:.4}\n");
+                if rng.next() < 0.1 {
+                    // A plunge: a pure Z move between XY moves.
+                    z = ((z - 1.0) * 1e4).round() / 1e4;
+                    text += &format!("G1 F600 Z{z:.4}\n");
+                }
+            }
+            text += "M2\n";
+            let tolerance = [0.005, 0.05, 0.5][case % 3];
+            let mut q = planned(&text, PathMode::Blend { tolerance });
+            let out = run(&mut q, |_, _| {});
+            let end = out.last().unwrap().position;
+            assert!(
+                (end.x - x).abs() < 1e-9 && (end.y - y).abs() < 1e-9 && (end.z - z).abs() < 1e-9,
+                "case {case}: ended at {end:?}, programmed X{x} Y{y} Z{z}"
+            );
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "case {case} (P{tolerance}): velocity {v}, acceleration {a}, jerk {j}\n{text}"
+            );
+        }
+    }
+
+    /// Known bug: after a dense blended curve, the look ahead aims at the
+    /// cap of the last blend and meets the program's final stop too late
+    /// (jerk about 17 times the limit in the last periods). Kept here, run
+    /// with `cargo test -p kerf-motion -- --ignored`, until it is fixed.
+    #[test]
+    #[ignore = "known bug: final stop after a dense blended circle (docs/motion.md)"]
+    fn a_dense_circle_ends_within_limits() {
+        let r = 20.0;
+        let n = 2513;
+        let mut text = format!("G21 G90\nG0 X{r} Y0\nG1 F3000\n");
+        for k in 1..=n {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            text += &format!("X{:.6} Y{:.6}\n", r * a.cos(), r * a.sin());
+        }
+        text += "M2\n";
+        let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+        let out = run(&mut q, |_, _| {});
+        let (v, a, j) = limit_use(&out);
+        assert!(
+            v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+            "v {v} a {a} j {j}"
         );
     }
 

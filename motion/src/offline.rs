@@ -240,7 +240,6 @@ pub fn run(
         ticks += 1;
         let time = ticks as f64 * dt;
         let p = sample.position.to_array();
-
         // Deviation: distance to the nearest programmed move around the
         // executing line (blends sit between two moves).
         while programmed.len() > 2 && programmed[1].line < sample.line {

@@ -256,7 +256,7 @@ impl Blend {
     }
 
     /// |d B / du| (the hodograph's length), cheaper than [`derivatives`].
-    fn speed(&self, u: f64) -> f64 {
+    pub fn speed(&self, u: f64) -> f64 {
         let q = &self.control;
         let w = 1.0 - u;
         let b4 = [

@@ -177,6 +177,32 @@ pub struct Planner<'k> {
     ready: VecDeque<Segment>,
 }
 
+/// Path limits the joints impose on one segment (see `Planner::joint_limits`).
+#[derive(Clone, Copy, Debug)]
+struct JointBounds {
+    v: f64,
+    a: f64,
+    j: f64,
+    /// Bound on a·v (mm²/s³) from the 3·q″·v·a jerk term.
+    av: f64,
+}
+
+impl Default for JointBounds {
+    fn default() -> Self {
+        JointBounds {
+            v: f64::INFINITY,
+            a: f64::INFINITY,
+            j: f64::INFINITY,
+            av: f64::INFINITY,
+        }
+    }
+}
+
+/// Corners sharper than 150° (|u1 − u2| = 2·sin(θ/2) above this) are not
+/// blended: a blend there is a hairpin with a near-cusp, and stopping is
+/// faster anyway.
+const SHARPEST: f64 = 1.931_851_652_578_136_6; // 2·sin(75°)
+
 /// Directions closer than this (|u1 − u2|) are one straight line.
 const STRAIGHT: f64 = 1e-9;
 
@@ -398,7 +424,7 @@ impl<'k> Planner<'k> {
         let xyz_only = |l: &Line| (3..9).all(|i| l.start[i] == l.end[i]);
         let (u1, u2) = (la.direction(), lb.direction());
         let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
-        if !(STRAIGHT..=2.0 - 1e-9).contains(&bend) || !xyz_only(&la) || !xyz_only(&lb) {
+        if !(STRAIGHT..=SHARPEST).contains(&bend) || !xyz_only(&la) || !xyz_only(&lb) {
             return None;
         }
         // Closed-form leg of a symmetric blend with zero end curvature.
@@ -449,9 +475,15 @@ impl<'k> Planner<'k> {
             legs.0 + legs.1,
         );
         let candidate = Blend::untabled(control);
+        // A well-shaped blend moves at about `scale` per unit parameter
+        // everywhere; large end curvatures can fold it into a near-cusp,
+        // where |B′| all but vanishes and arc length stops being usable.
+        let scale = legs.0 + legs.1;
         let within = (1..32).all(|k| {
-            let p = candidate.point_at_parameter(k as f64 / 32.0);
+            let u = k as f64 / 32.0;
+            let p = candidate.point_at_parameter(u);
             distance_to_xyz_line(&p, &la).min(distance_to_xyz_line(&p, &lb)) <= tolerance
+                && candidate.speed(u) >= 0.3 * scale
         });
         within.then_some(control)
     }
@@ -667,26 +699,29 @@ impl<'k> Planner<'k> {
                 }
             }
             Shape::Blend(b) => {
-                // Sample at the arc-length table's nodes; dκ/ds by differences.
-                const N: usize = crate::path::TABLE;
-                let frames: [crate::path::Frame; N + 1] =
-                    std::array::from_fn(|k| b.frame_at_parameter(k as f64 / N as f64));
+                // 32 samples; dκ/ds by differences between them. On a sharp
+                // corner the curvature peak is narrow: the largest rate
+                // between samples can exceed the sampled differences, so
+                // they get a 25 % allowance.
+                const N: usize = 32;
+                let mut last: Option<(f64, crate::path::Frame)> = None;
                 for k in 0..=N {
-                    let f = &frames[k];
+                    let u = k as f64 / N as f64;
+                    let (sk, f) = (b.length_to(u), b.frame_at_parameter(u));
                     for i in 0..3 {
                         t_max[i] = t_max[i].max(f.tangent[i].abs());
                         k_max[i] = k_max[i].max(f.curvature[i].abs());
                     }
-                    if k < N {
-                        let ds = b.table[k + 1] - b.table[k];
+                    if let Some((s0, f0)) = last {
+                        let ds = sk - s0;
                         if ds > 0.0 {
                             for i in 0..3 {
-                                let g = &frames[k + 1];
-                                dk_max[i] =
-                                    dk_max[i].max(((g.curvature[i] - f.curvature[i]) / ds).abs());
+                                let rate = (f.curvature[i] - f0.curvature[i]) / ds;
+                                dk_max[i] = dk_max[i].max(1.25 * rate.abs());
                             }
                         }
                     }
+                    last = Some((sk, f));
                 }
             }
         }
@@ -719,57 +754,72 @@ impl<'k> Planner<'k> {
             }
         }
         if self.sample_joints {
-            let (jv, ja, jv_curv) = self.joint_limits(shape, length);
-            v = v.min(jv).min(jv_curv);
-            a = a.min(ja);
+            let b = self.joint_limits(shape, length);
+            v = v.min(b.v);
+            a = a.min(b.a);
+            if self.config.jerk_limited {
+                j = j.min(b.j);
+                if v.is_finite() && v > 0.0 {
+                    a = a.min(b.av / v);
+                }
+            }
         }
         (v, a, j)
     }
 
-    /// Joint velocity and acceleration limits on path speed and
-    /// acceleration, from dq/ds and d²q/ds² sampled through the
-    /// kinematics: joint speed is dq/ds·v and joint acceleration
-    /// dq/ds·a + d²q/ds²·v², whose budget is split half and half.
-    /// Returns (v_max, a_max, v_max from d²q/ds²).
-    fn joint_limits(&self, shape: &Shape, length: f64) -> (f64, f64, f64) {
+    /// Limits on path speed, acceleration and jerk from the joints, from
+    /// q′ = dq/ds, q″ and q‴ sampled through the kinematics on 5-point
+    /// stencils. Joint speed is q′·v, acceleration q′·a + q″·v², jerk
+    /// q′·j + 3·q″·v·a + q‴·v³; the budgets are split (halves, thirds) so
+    /// each sum stays within the joint's limit. Between samples a derivative
+    /// can grow by the next one times half the sample spacing: the bounds
+    /// add that rather than trust the samples.
+    fn joint_limits(&self, shape: &Shape, length: f64) -> JointBounds {
         let joints = self.kins.joints();
         let n = joints.len();
         let samples = ((length / 2.0).ceil() as usize).clamp(3, 64);
-        let h = (length / samples as f64 / 4.0).clamp(1e-6, 0.5);
-        let (mut v, mut a, mut v_curv) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
+        let spacing = length / samples as f64;
+        let h = (spacing / 4.0).clamp(1e-6, 0.5).min(length / 4.0);
+        let mut b = JointBounds::default();
         for k in 0..=samples {
             // A symmetric stencil inside the segment: at its ends a clamped
-            // stencil would turn the second difference into a first one.
+            // stencil would mix up the differences.
             let s = (length * k as f64 / samples as f64)
-                .clamp(h.min(length / 2.0), (length - h).max(length / 2.0));
-            let (s0, s1) = ((s - h).max(0.0), (s + h).min(length));
-            let mut q = [[0.0; MAX_JOINTS]; 3];
-            let ok = [s0, s, s1].iter().enumerate().all(|(m, &si)| {
+                .clamp(2.0 * h, (length - 2.0 * h).max(2.0 * h));
+            let mut q = [[0.0; MAX_JOINTS]; 5];
+            let ok = (0..5).all(|m| {
+                let at = (s + (m as f64 - 2.0) * h).clamp(0.0, length);
                 self.kins
-                    .inverse(&Position::from_array(shape.point(si)), &mut q[m][..n])
+                    .inverse(&Position::from_array(shape.point(at)), &mut q[m][..n])
                     .is_ok()
             });
-            if !ok || s1 - s0 <= 0.0 {
+            if !ok || h <= 0.0 {
                 continue;
             }
-            let hh = (s1 - s0) / 2.0;
-            // Between samples |dq/ds| can grow by up to |d²q/ds²| times half
-            // the sample spacing: bound it rather than trust the sample.
-            let spacing = length / samples as f64;
             for (jn, spec) in joints.iter().enumerate() {
-                let d2 = (q[2][jn] - 2.0 * q[1][jn] + q[0][jn]) / (hh * hh);
-                let d1 = ((q[2][jn] - q[0][jn]) / (s1 - s0)).abs() + d2.abs() * spacing / 2.0;
+                let d1 = (q[3][jn] - q[1][jn]) / (2.0 * h);
+                let d2 = (q[3][jn] - 2.0 * q[2][jn] + q[1][jn]) / (h * h);
+                let d3 =
+                    (q[4][jn] - 2.0 * q[3][jn] + 2.0 * q[1][jn] - q[0][jn]) / (2.0 * h * h * h);
+                let d1 = d1.abs() + d2.abs() * spacing / 2.0;
+                let d2 = d2.abs() + d3.abs() * spacing / 2.0;
+                let d3 = d3.abs();
                 let l = spec.limits;
-                if d1.abs() > 0.0 {
-                    v = v.min(l.max_velocity / d1.abs());
-                    a = a.min(0.5 * l.max_acceleration / d1.abs());
+                if d1 > 0.0 {
+                    b.v = b.v.min(l.max_velocity / d1);
+                    b.a = b.a.min(0.5 * l.max_acceleration / d1);
+                    b.j = b.j.min(l.max_jerk / 3.0 / d1);
                 }
-                if d2.abs() > 1e-12 {
-                    v_curv = v_curv.min((0.5 * l.max_acceleration / d2.abs()).sqrt());
+                if d2 > 1e-12 {
+                    b.v = b.v.min((0.5 * l.max_acceleration / d2).sqrt());
+                    b.av = b.av.min(l.max_jerk / 9.0 / d2);
+                }
+                if d3 > 1e-12 && l.max_jerk.is_finite() {
+                    b.v = b.v.min((l.max_jerk / 3.0 / d3).cbrt());
                 }
             }
         }
-        (v, a, v_curv)
+        b
     }
 
     fn curvature_jump_cap(&self, jump: &Vec9) -> f64 {

@@ -178,23 +178,33 @@ pub fn plan(
         );
         return Ok(());
     }
-    println!("machine          {}", machine.description.name);
-    println!("cycle time       {:.3} s", report.cycle_time);
-    println!("segments         {}", report.segments);
-    println!("max deviation    {:.6} mm", report.max_deviation);
-    println!("max limit use    {:.6}", report.max_limit_ratio());
-    println!();
-    println!(
+    // A closed pipe (`| head`) ends the output quietly.
+    let _ = print_report(&machine.description.name, &report);
+    Ok(())
+}
+
+fn print_report(machine: &str, report: &Report) -> std::io::Result<()> {
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    writeln!(out, "machine          {machine}")?;
+    writeln!(out, "cycle time       {:.3} s", report.cycle_time)?;
+    writeln!(out, "segments         {}", report.segments)?;
+    writeln!(out, "max deviation    {:.6} mm", report.max_deviation)?;
+    writeln!(out, "max limit use    {:.6}", report.max_limit_ratio())?;
+    writeln!(out)?;
+    writeln!(
+        out,
         "{:<8} {:>10} {:>10} {:>10}   worst at",
         "", "velocity", "accel", "jerk"
-    );
+    )?;
     for (kind, list) in [("axis", &report.axes), ("joint", &report.joints)] {
         for u in list.iter() {
             let worst = [u.velocity, u.acceleration, u.jerk]
                 .into_iter()
                 .max_by(|a, b| a.ratio.total_cmp(&b.ratio))
                 .unwrap_or_default();
-            println!(
+            writeln!(
+                out,
                 "{:<8} {:>10.4} {:>10.4} {:>10.4}   line {} at {:.3} s",
                 format!("{kind} {}", u.name),
                 u.velocity.ratio,
@@ -202,7 +212,7 @@ pub fn plan(
                 u.jerk.ratio,
                 worst.line,
                 worst.time
-            );
+            )?;
         }
     }
     Ok(())
