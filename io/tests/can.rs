@@ -361,8 +361,12 @@ fn a_machine_can_mix_simulated_joints_and_can_drives() {
             "joint 1 stuck at {}",
             fb.joints[1].position
         );
+        // Tick at the servo period, as the servo thread does: the CAN
+        // backend queues one setpoint per tick for its own thread, and a
+        // caller ticking faster than real time overflows that queue (a
+        // fault by design). The wait itself ends on the feedback, not on time.
+        std::thread::sleep(Duration::from_millis(1));
         hal.exchange(0.001, &out, &mut fb).unwrap();
-        std::thread::yield_now();
     }
     assert_eq!(fb.joints[0].position, 1.5);
 }
