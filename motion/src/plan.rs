@@ -131,6 +131,78 @@ impl<'k> Planner<'k> {
             | CanonCmd::Comment(_)
             | CanonCmd::Message(_)
             | CanonCmd::ProgramEnd => return Ok(None),
+            // Offsets and modes the interpreter has already applied to
+            // every position, and commands for other parts of the machine.
+            CanonCmd::SetG5xOffset { .. }
+            | CanonCmd::SetG92Offset { .. }
+            | CanonCmd::SetXYRotation { .. }
+            | CanonCmd::UseToolLengthOffset { .. }
+            | CanonCmd::SelectPlane(_)
+            | CanonCmd::SetFeedMode { .. }
+            | CanonCmd::SetMotionControlMode(_)
+            | CanonCmd::SetNaivecamTolerance { .. }
+            | CanonCmd::SetSpindleSpeed { .. }
+            | CanonCmd::StartSpindleClockwise { .. }
+            | CanonCmd::StartSpindleCounterclockwise { .. }
+            | CanonCmd::StopSpindleTurning { .. }
+            | CanonCmd::SetSpindleMode { .. }
+            | CanonCmd::OrientSpindle { .. }
+            | CanonCmd::WaitSpindleOrientComplete { .. }
+            | CanonCmd::SelectTool { .. }
+            | CanonCmd::StartChange
+            | CanonCmd::ChangeTool { .. }
+            | CanonCmd::ChangeToolNumber { .. }
+            | CanonCmd::SetToolTableEntry { .. }
+            | CanonCmd::MistOn
+            | CanonCmd::MistOff
+            | CanonCmd::FloodOn
+            | CanonCmd::FloodOff
+            | CanonCmd::EnableFeedOverride
+            | CanonCmd::DisableFeedOverride
+            | CanonCmd::EnableSpeedOverride { .. }
+            | CanonCmd::DisableSpeedOverride { .. }
+            | CanonCmd::EnableAdaptiveFeed
+            | CanonCmd::DisableAdaptiveFeed
+            | CanonCmd::EnableFeedHold
+            | CanonCmd::DisableFeedHold
+            | CanonCmd::SetMotionOutputBit { .. }
+            | CanonCmd::ClearMotionOutputBit { .. }
+            | CanonCmd::SetMotionOutputValue { .. }
+            | CanonCmd::SetAuxOutputBit { .. }
+            | CanonCmd::ClearAuxOutputBit { .. }
+            | CanonCmd::SetAuxOutputValue { .. }
+            | CanonCmd::WaitInput { .. }
+            | CanonCmd::UserMCode { .. }
+            | CanonCmd::Log(_)
+            | CanonCmd::LogOpen(_)
+            | CanonCmd::LogAppend(_)
+            | CanonCmd::LogClose
+            | CanonCmd::Print(_)
+            | CanonCmd::ProgramStop
+            | CanonCmd::OptionalProgramStop
+            | CanonCmd::PalletShuttle
+            | CanonCmd::Finish => return Ok(None),
+            CanonCmd::ArcFeed { .. } => {
+                return Err(err(
+                    "arc move (G2/G3) is not supported by the planner yet".into()
+                ))
+            }
+            CanonCmd::StraightProbe { .. } => {
+                return Err(err(
+                    "probe move (G38.x) is not supported by the planner yet".into(),
+                ))
+            }
+            CanonCmd::RigidTap { .. } => {
+                return Err(err(
+                    "rigid tapping (G33.1) is not supported by the planner yet".into(),
+                ))
+            }
+            CanonCmd::StartSpeedFeedSync { .. } | CanonCmd::StopSpeedFeedSync => {
+                return Err(err(
+                    "spindle-synchronised motion (G33, G76) is not supported by the planner yet"
+                        .into(),
+                ))
+            }
         };
 
         let start = self.position.to_array();
