@@ -357,6 +357,10 @@ pub enum CanonCmd {
     SetMotionControlMode(MotionMode),
     /// Tolerance in mm for merging collinear small moves (G64 Q).
     SetNaivecamTolerance { tolerance: f64 },
+    /// Trajectory planner choice (G64 … R, as in LinuxCNC 2.10): planner 0
+    /// is the default; planner 1 scales the peak acceleration it may use in
+    /// blends by `peak_scale` (0.1 to 1).
+    SetPlannerMode { planner: u8, peak_scale: f64 },
 
     // ---- motion ----
     /// Rapid move (G0) in a straight line to `end`.
@@ -564,6 +568,10 @@ impl fmt::Display for CanonCmd {
             SetNaivecamTolerance { tolerance } => {
                 write!(f, "naivecam tolerance {tolerance:.4} mm")
             }
+            SetPlannerMode {
+                planner,
+                peak_scale,
+            } => write!(f, "planner {planner} peak scale {peak_scale:.4}"),
             StraightTraverse { end } => {
                 write!(f, "rapid ")?;
                 fmt_pos(f, end)

@@ -372,10 +372,20 @@ impl Interp<'_> {
                     if !matches!(cp.plane, Plane::XY | Plane::YZ | Plane::XZ) {
                         bail!("{name} for plane {} not implemented", plane_name(cp.plane));
                     }
+                    // LinuxCNC passes the tap's coordinates to its plane
+                    // mapping in a different order for G18 and G19 (the
+                    // tap moves along a plane axis there); kept so that
+                    // programs behave as on LinuxCNC.
+                    let tap = |depth: f64| match cp.plane {
+                        Plane::YZ => (depth, aa, bb),
+                        Plane::XZ => (bb, depth, aa),
+                        _ => (aa, bb, depth),
+                    };
                     let (feed_was, speed_was) = (self.feed_override, self.speed_override);
                     self.emit(CanonCmd::DisableFeedOverride);
                     self.emit(CanonCmd::DisableSpeedOverride { spindle: 0 });
-                    self.cycle_feed(cp, aa, bb, cc);
+                    let (ta, tb, tc) = tap(cc);
+                    self.cycle_feed(cp, ta, tb, tc);
                     self.emit(CanonCmd::StopSpindleTurning { spindle: 0 });
                     self.spindle_restart(if motion == g::G84 {
                         Turning::CounterClockwise
@@ -383,7 +393,8 @@ impl Interp<'_> {
                         Turning::Clockwise
                     });
                     self.emit(CanonCmd::Dwell { seconds: p_dwell });
-                    self.cycle_feed(cp, aa, bb, clear_cc);
+                    let (ta, tb, tc) = tap(clear_cc);
+                    self.cycle_feed(cp, ta, tb, tc);
                     self.emit(CanonCmd::StopSpindleTurning { spindle: 0 });
                     self.spindle_restart(if motion == g::G84 {
                         Turning::Clockwise

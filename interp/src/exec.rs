@@ -772,7 +772,7 @@ impl Interp<'_> {
         }
         if b.g_modes[gm::CONTROL_MODE] != -1 && b.once(step::CONTROL_MODE) {
             self.point_g(b, gm::CONTROL_MODE);
-            self.convert_control_mode(b.g_modes[gm::CONTROL_MODE], b.p(), b.q())?;
+            self.convert_control_mode(b.g_modes[gm::CONTROL_MODE], b.p(), b.q(), b.get(b'r'))?;
         }
         if b.g_modes[gm::DISTANCE_MODE] != -1 && b.once(step::DISTANCE_MODE) {
             self.convert_distance_mode(b.g_modes[gm::DISTANCE_MODE]);
@@ -1069,7 +1069,7 @@ impl Interp<'_> {
         Ok(())
     }
 
-    fn convert_control_mode(&mut self, code: i32, p: f64, q: f64) -> R {
+    fn convert_control_mode(&mut self, code: i32, p: f64, q: f64, r: Option<f64>) -> R {
         chk!(
             self.cutter_comp_side != Side::Off,
             "Cannot change control mode with cutter radius compensation on"
@@ -1084,6 +1084,17 @@ impl Interp<'_> {
                 self.control_mode = MotionMode::ExactStop;
             }
             _ => {
+                if let Some(r) = r {
+                    let (planner, peak_scale) = if r == 0.0 {
+                        (0, -1.0)
+                    } else {
+                        (1, r.clamp(0.1, 1.0))
+                    };
+                    self.emit(CanonCmd::SetPlannerMode {
+                        planner,
+                        peak_scale,
+                    });
+                }
                 let tolerance = if p >= 0.0 { p } else { 0.0 };
                 self.tolerance = tolerance;
                 self.control_mode = MotionMode::Continuous { tolerance };
@@ -1546,6 +1557,11 @@ impl Interp<'_> {
                     for p in 5210..=5219 {
                         self.params[p] = 0.0;
                     }
+                    for i in 0..9 {
+                        self.cur[i] += self.axis_offset[i];
+                    }
+                    self.axis_offset = [0.0; 9];
+                    self.canon_set_g92_offset([0.0; 9]);
                 }
                 if m == 30 {
                     self.emit(CanonCmd::PalletShuttle);
@@ -1709,62 +1725,38 @@ impl Interp<'_> {
         if cur_g[5] != saved.g[5] {
             self.execute_text(&format!("G{}", saved.g[5] / 10))?;
         }
+        // As LinuxCNC 2.10 does: feed, speed and the path mode are always
+        // restored; other G modes and the M modes only where they differ.
         let cur_g = self.active_g_codes();
-        let cur_s = [
-            self.sequence_number as f64,
-            self.feed_rate,
-            self.speed,
-            self.tolerance,
-            self.naivecam_tolerance,
-        ];
-        let mut cmd = String::new();
-        let mut g64_changed = false;
-        for i in 0..5 {
-            if saved.settings[i] != cur_s[i] {
-                match i {
-                    1 => cmd.push_str(&format!(" F{:.1}", saved.settings[i])),
-                    2 => cmd.push_str(&format!(" S{:.0}", saved.settings[i])),
-                    3 | 4 => g64_changed = true,
-                    _ => {}
-                }
-            }
-        }
-        for i in 0..17 {
+        let mut cmd = format!(" F{:.1} S{:.0}", saved.settings[1], saved.settings[2]);
+        for i in [3, 4, 6, 7, 8, 9, 10, 13, 14, 15, 16] {
             let val = saved.g[i];
-            if val == cur_g[i] {
-                continue;
+            if val != cur_g[i] && val != -1 {
+                cmd.push(' ');
+                cmd.push_str(&gcode_name(val));
             }
-            match i {
-                3 | 4 | 6 | 7 | 8 | 9 | 10 | 13 | 14 | 15 | 16 if val != -1 => {
-                    cmd.push(' ');
-                    cmd.push_str(&gcode_name(val));
+        }
+        match saved.g[11] {
+            g::G61 => cmd.push_str(" G61"),
+            g::G61_1 => cmd.push_str(" G61.1"),
+            _ => {
+                if saved.settings[3] < 0.0 {
+                    cmd.push_str(" G64");
+                } else {
+                    cmd.push_str(&format!(
+                        " G64 P{:.6} Q{:.6}",
+                        saved.settings[3],
+                        saved.settings[4].max(0.0)
+                    ));
                 }
-                11 => match val {
-                    g::G64 => g64_changed = true,
-                    g::G61 => cmd.push_str(" G61"),
-                    g::G61_1 => cmd.push_str(" G61.1"),
-                    _ => {}
-                },
-                _ => {}
             }
         }
-        if saved.g[11] == g::G64 && g64_changed {
-            if saved.settings[3] < 0.0 {
-                cmd.push_str(" G64");
-            } else if saved.settings[4] < 0.0 {
-                cmd.push_str(&format!(" G64 P{:.6}", saved.settings[3]));
-            } else {
-                cmd.push_str(&format!(
-                    " G64 P{:.6} Q{:.6}",
-                    saved.settings[3], saved.settings[4]
-                ));
-            }
-        }
+        // Each M-code goes on its own line; the first joins the G line.
         let cur_m = self.active_m_codes();
-        for i in 0..9 {
+        for i in [2, 4, 5, 6, 7, 8] {
             let val = saved.m[i];
-            if val != cur_m[i] && matches!(i, 2 | 4 | 5 | 6 | 7 | 8) && val != -1 {
-                cmd.push_str(&format!("\nM{val}"));
+            if val != cur_m[i] && val != -1 {
+                cmd.push_str(&format!("M{val}\n"));
             }
         }
         for line in cmd.split('\n') {

@@ -291,6 +291,9 @@ pub(crate) struct Interp<'a> {
     pub queue_endpoint: Option<[f64; 2]>,
     /// The word being executed, named in errors that do not name their own.
     pub fault_word: Option<(String, u32)>,
+    /// The text errors show instead of the line read: the call a remapped
+    /// code turned into (LinuxCNC reports that text).
+    pub line_text_override: Option<String>,
 }
 
 /// Version reported by `#<_vmajor>` and `#<_vminor>` (the LinuxCNC release
@@ -403,6 +406,7 @@ impl<'a> Interp<'a> {
             queue: Vec::new(),
             queue_endpoint: None,
             fault_word: None,
+            line_text_override: None,
             cfg,
         };
         it.init();
@@ -558,7 +562,10 @@ impl<'a> Interp<'a> {
             column,
             word,
             message: f.message,
-            line_text: String::from_utf8_lossy(&self.raw).into_owned(),
+            line_text: self
+                .line_text_override
+                .clone()
+                .unwrap_or_else(|| String::from_utf8_lossy(&self.raw).into_owned()),
         }
     }
 
@@ -718,7 +725,10 @@ impl<'a> Interp<'a> {
         for i in 0..9 {
             self.params[5420 + i] = self.cur[i];
         }
+        let abs = self.absolute_position();
+        self.params[5021..5030].copy_from_slice(&abs);
         self.fault_word = None;
+        self.line_text_override = None;
         let offset = self.tell();
         if !self.read_raw_line()? {
             if let Some(sub) = &self.skipping_to_sub {
@@ -901,6 +911,8 @@ use crate::error::bail;
 /// [`Config::continue_after_error`] is set.
 pub struct Interpreter<'a> {
     st: Interp<'a>,
+    /// An error to give once the commands before it have been taken.
+    pending_error: Option<InterpError>,
     started: bool,
     done: bool,
     saved: bool,
@@ -991,6 +1003,7 @@ impl<'a> Interpreter<'a> {
     ) -> Self {
         Interpreter {
             st: Interp::new(reader, file.into(), path, cfg, env),
+            pending_error: None,
             started: false,
             done: false,
             saved: false,
@@ -1038,6 +1051,9 @@ impl<'a> Iterator for Interpreter<'a> {
             if let Some(c) = self.st.out.pop_front() {
                 return Some(Ok(c));
             }
+            if let Some(e) = self.pending_error.take() {
+                return Some(Err(e));
+            }
             if self.done {
                 return None;
             }
@@ -1057,21 +1073,14 @@ impl<'a> Iterator for Interpreter<'a> {
                 Err(f) => {
                     let at_eof = f.message.starts_with("File ended with no percent sign")
                         || f.message.starts_with("EOF in file:");
+                    // The commands the failing line gave before it failed
+                    // come first, as LinuxCNC gives them as it goes.
                     let e = self.st.locate(f);
                     self.st.unwind_call();
-                    if self.st.cfg.continue_after_error && !at_eof {
-                        // Keep the commands the failing line made before
-                        // it failed, as LinuxCNC does when it continues.
-                        self.st.out.push_front(Canon {
-                            source: self.st.source(),
-                            cmd: CanonCmd::Comment(String::new()),
-                        });
-                        self.st.out.pop_front();
-                        return Some(Err(e));
+                    self.pending_error = Some(e);
+                    if !self.st.cfg.continue_after_error || at_eof {
+                        self.finish(Ending::Error);
                     }
-                    self.st.out.clear();
-                    self.finish(Ending::Error);
-                    return Some(Err(e));
                 }
             }
         }

@@ -137,6 +137,15 @@ impl Rs274Formatter {
             SetNaivecamTolerance { tolerance } => {
                 let _ = write!(s, "SET_NAIVECAM_TOLERANCE({:.4})", self.len(*tolerance));
             }
+            SetPlannerMode {
+                planner,
+                peak_scale,
+            } => {
+                let _ = write!(
+                    s,
+                    "SET_PLANNER_MODE(type={planner}, peak_scale={peak_scale:.6})"
+                );
+            }
             StraightTraverse { end } => {
                 let p = self.state.to_program(*end);
                 s.push_str("STRAIGHT_TRAVERSE(");
@@ -423,8 +432,11 @@ pub fn run_rs274(interp: Interpreter<'_>, options: Rs274Options) -> Rs274Output 
     };
     let mut stdout = String::new();
     let mut failed = false;
-    for (n, item) in interp.enumerate() {
-        if options.max_commands.is_some_and(|max| n >= max) {
+    let mut interp = interp;
+    let mut n = 0usize;
+    for item in interp.by_ref() {
+        n += 1;
+        if options.max_commands.is_some_and(|max| n > max) {
             let report = "stopped: too many commands (endless loop?)\n";
             out.stderr.push_str(report);
             out.merged.push_str(report);
@@ -458,6 +470,9 @@ pub fn run_rs274(interp: Interpreter<'_>, options: Rs274Options) -> Rs274Output 
     fmt.on_reset(&mut stdout);
     out.stdout.push_str(&stdout);
     out.merged.push_str(&stdout);
-    out.status = failed as i32;
+    // rs274 exits 0 when the program reaches its end, even if it reported
+    // errors on the way (when told to continue after them).
+    let ending = interp.ending();
+    out.status = (failed && ending != Some(crate::interp::Ending::ProgramEnd)) as i32;
     out
 }

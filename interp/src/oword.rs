@@ -104,17 +104,8 @@ impl Interp<'_> {
 
     /// Enter a subroutine: pass arguments in #1–#30 and go to its label.
     pub(crate) fn execute_call(&mut self, call_type: CallType) -> R {
-        if call_type == CallType::Remap {
-            self.remap_add_parameters()?;
-        }
         let level = self.call_level;
-        self.skipping_o = None;
-        if call_type != CallType::M98Sub {
-            for i in 0..SUB_PARAMS {
-                self.contexts[level - 1].saved_params[i] = self.params[i + 1];
-                self.params[i + 1] = self.block.params.get(i).copied().unwrap_or(0.0);
-            }
-        }
+        // Where to come back to (also after an error in the call).
         let pos = self.tell();
         let file = self.cur_file;
         let seq = self.sequence_number;
@@ -123,6 +114,16 @@ impl Interp<'_> {
             prev.position = pos;
             prev.file = file;
             prev.sequence_number = seq;
+        }
+        if call_type == CallType::Remap {
+            self.remap_add_parameters()?;
+        }
+        self.skipping_o = None;
+        if call_type != CallType::M98Sub {
+            for i in 0..SUB_PARAMS {
+                self.contexts[level - 1].saved_params[i] = self.params[i + 1];
+                self.params[i + 1] = self.block.params.get(i).copied().unwrap_or(0.0);
+            }
         }
         if self.cfg.oword_n_args {
             self.add_named_param("n_args", true)?;
@@ -142,6 +143,10 @@ impl Interp<'_> {
             } else {
                 prev.m98_loop_counter = -1;
             }
+        }
+        // M98 with L0 calls nothing (LinuxCNC then goes on with the next line).
+        if self.block.o_type == OType::M98 && self.block.l() == 0 {
+            return Ok(());
         }
         if let Err(e) = self.control_back_to() {
             self.call_level -= 1;
@@ -245,6 +250,14 @@ impl Interp<'_> {
                 if self.block.o_type == OType::Bare {
                     return Ok(ExecStatus::Ok);
                 }
+                // A sub line inside a called sub's body that is not the sub
+                // itself is a definition nested in another.
+                chk!(
+                    self.call_level != 0
+                        && self.contexts[self.call_level].sub_name.as_deref()
+                            != Some(self.block.o_name.as_str()),
+                    "Nested subroutine definition"
+                );
                 if self.call_level == 0 {
                     chk!(self.defining_sub, "Nested subroutine definition");
                     self.control_save_offset()?;

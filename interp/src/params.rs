@@ -137,12 +137,8 @@ impl Interp<'_> {
         };
         let section = name[5..close].to_ascii_uppercase();
         let key = name[close + 1..].to_ascii_uppercase();
-        match ini.get_f64(&section, &key) {
-            Some(v) => Ok(Some(v)),
-            None => Err(Fault::new(format!(
-                "Named INI parameter #<{name}> not found in INI file"
-            ))),
-        }
+        // A missing entry is an undefined parameter (EXISTS gives 0).
+        Ok(ini.get_f64(&section, &key))
     }
 
     /// Create a named parameter (unset) if it does not exist yet.
@@ -295,6 +291,23 @@ impl Interp<'_> {
             "_task" => 0.0,
             _ => 0.0,
         }
+    }
+
+    /// The position relative to machine zero (all offsets added), in
+    /// program units: #5021–#5029 and `#<_abs_x>` ….
+    pub(crate) fn absolute_position(&self) -> [f64; 9] {
+        let mut p = [0.0; 9];
+        let (x, y) = rotate(
+            self.cur[0] + self.axis_offset[0],
+            self.cur[1] + self.axis_offset[1],
+            self.rotation_xy,
+        );
+        p[0] = x + self.origin_offset[0] + self.tool_offset[0];
+        p[1] = y + self.origin_offset[1] + self.tool_offset[1];
+        for i in 2..9 {
+            p[i] = self.abs_axis(i);
+        }
+        p
     }
 
     fn abs_axis(&self, i: usize) -> f64 {

@@ -975,6 +975,19 @@ impl Interp<'_> {
                 chk!(self.defining_sub, "Nested subroutine definition");
             }
             OType::EndSub | OType::Return | OType::M99 => {
+                // Searching forward for a called sub must not run past the
+                // end of the sub that called it.
+                if let Some(wanted) = &self.skipping_to_sub {
+                    if self.call_level >= 2
+                        && self.contexts[self.call_level - 1].sub_name.as_deref()
+                            == Some(block.o_name.as_str())
+                    {
+                        return Err(Fault::new(format!(
+                            "Failed to find sub 'O{wanted}' before the end of sub 'O{}'",
+                            block.o_name
+                        )));
+                    }
+                }
                 if self
                     .skipping_o
                     .as_deref()
@@ -1350,7 +1363,12 @@ impl Interp<'_> {
         }
         if block.has(b'r') {
             chk!(
+                block.g_modes[gm::CONTROL_MODE] == g::G64 && block.m_modes[7] == 19,
+                "R word is ambiguous on a line with both G64 and M19 - use separate lines"
+            );
+            chk!(
                 !matches!(motion, g::G2 | g::G3 | g::G76 | g::G73 | g::G74)
+                    && block.g_modes[gm::CONTROL_MODE] != g::G64
                     && !g7x
                     && !(g::G81..=g::G89).contains(&motion)
                     && !matches!(comp, g::G41_1 | g::G42_1)

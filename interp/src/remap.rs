@@ -129,6 +129,7 @@ impl Interp<'_> {
                 call.params.push(rounded);
             }
         }
+        self.line_text_override = Some(format!("O <{}> call ", remap.ngc));
         self.block = call;
         Ok(ExecStatus::Remap)
     }

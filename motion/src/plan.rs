@@ -141,6 +141,7 @@ impl<'k> Planner<'k> {
             | CanonCmd::SetFeedMode { .. }
             | CanonCmd::SetMotionControlMode(_)
             | CanonCmd::SetNaivecamTolerance { .. }
+            | CanonCmd::SetPlannerMode { .. }
             | CanonCmd::SetSpindleSpeed { .. }
             | CanonCmd::StartSpindleClockwise { .. }
             | CanonCmd::StartSpindleCounterclockwise { .. }
