@@ -10,8 +10,8 @@ use crate::canon::{CanonCmd, MotionMode, OrientDirection, Plane, Units};
 use crate::emit::rotate;
 use crate::error::{bail, chk, Fault, R};
 use crate::interp::{
-    gcode_name, Distance, ExecStatus, FeedMode, Interp, Retract, SavedModes, Side, Turning, A, C,
-    X, Y, Z,
+    gcode_name, Distance, ExecStatus, FeedMode, Interp, Retract, SavedModes, Side, Turning,
+    WordName, A, C, X, Y, Z,
 };
 
 /// Inch per mm, for unit changes.
@@ -40,23 +40,20 @@ impl Interp<'_> {
     fn point_g(&mut self, b: &Block, group: usize) {
         let code = b.g_modes[group];
         if code >= 0 {
-            self.fault_word = Some((gcode_name(code), b.g_cols[group]));
+            self.fault_word = Some((WordName::G(code), b.g_cols[group]));
         }
     }
 
     fn point_m(&mut self, b: &Block, group: usize) {
         let code = b.m_modes[group];
         if code >= 0 {
-            self.fault_word = Some((format!("M{code}"), b.m_cols[group]));
+            self.fault_word = Some((WordName::M(code), b.m_cols[group]));
         }
     }
 
     fn point_word(&mut self, b: &Block, letter: u8) {
         if b.has(letter) {
-            self.fault_word = Some((
-                (letter as char).to_ascii_uppercase().to_string(),
-                b.col(letter),
-            ));
+            self.fault_word = Some((WordName::Letter(letter), b.col(letter)));
         }
     }
 
@@ -819,7 +816,7 @@ impl Interp<'_> {
                 let first = b"xyzabcuvw".iter().find(|&&l| b.has(l)).copied();
                 match first {
                     Some(l) => self.point_word(b, l),
-                    None => self.fault_word = Some((gcode_name(b.motion_to_be), 1)),
+                    None => self.fault_word = Some((WordName::G(b.motion_to_be), 1)),
                 }
             }
             if self.remap_for('g', b.motion_to_be).is_some() {

@@ -165,6 +165,20 @@ pub(crate) enum ExecStatus {
     Remap,
 }
 
+/// A word named in errors, kept cheap on the hot path and spelled out only
+/// when an error is reported.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum WordName {
+    /// A G-code (times ten).
+    G(i32),
+    /// An M-code.
+    M(i32),
+    /// A letter word (lower case).
+    Letter(u8),
+    /// The O-word of the current block.
+    O,
+}
+
 /// Most nested subroutine calls (LinuxCNC's limit).
 pub(crate) const MAX_CALL_LEVELS: usize = 10;
 
@@ -190,7 +204,10 @@ pub(crate) struct Interp<'a> {
     pub percent_flag: bool,
     /// The block being executed (blocks[0] in LinuxCNC) and the stack of
     /// blocks whose remapped codes are running.
-    pub block: Block,
+    pub block: Box<Block>,
+    /// A second block to swap in while `block` is worked on (swapping
+    /// boxes moves a pointer, not the block).
+    pub spare_block: Option<Box<Block>>,
     pub remap_blocks: Vec<Block>,
 
     // ---- position and offsets (program units) ----
@@ -290,7 +307,7 @@ pub(crate) struct Interp<'a> {
     pub queue: Vec<crate::comp::Queued>,
     pub queue_endpoint: Option<[f64; 2]>,
     /// The word being executed, named in errors that do not name their own.
-    pub fault_word: Option<(String, u32)>,
+    pub fault_word: Option<(WordName, u32)>,
     /// The text errors show instead of the line read: the call a remapped
     /// code turned into (LinuxCNC reports that text).
     pub line_text_override: Option<String>,
@@ -325,7 +342,8 @@ impl<'a> Interp<'a> {
             line_n: None,
             line_length: 0,
             percent_flag: false,
-            block: Block::default(),
+            block: Box::default(),
+            spare_block: Some(Box::default()),
             remap_blocks: Vec::new(),
             cur: [0.0; 9],
             program: [0.0; 3],
@@ -546,13 +564,23 @@ impl<'a> Interp<'a> {
     // ------------------------------------------------------------------
     // errors
 
+    /// The spelling of a word for error messages: `G2`, `M3`, `X`, `O100`.
+    fn word_name(&self, w: WordName) -> String {
+        match w {
+            WordName::G(code) => gcode_name(code),
+            WordName::M(code) => format!("M{code}"),
+            WordName::Letter(l) => (l.to_ascii_uppercase() as char).to_string(),
+            WordName::O => format!("O{}", self.block.o_name),
+        }
+    }
+
     /// Turn a fault into an error located in the current line.
     pub fn locate(&self, f: Fault) -> InterpError {
         let (word, column) = match (f.word, f.column) {
             (Some(w), Some(c)) => (Some(w), c),
             (None, Some(c)) => (None, c),
-            (w, None) => match &self.fault_word {
-                Some((fw, c)) => (w.or_else(|| Some(fw.clone())), *c),
+            (w, None) => match self.fault_word {
+                Some((fw, c)) => (w.or_else(|| Some(self.word_name(fw))), c),
                 None => (w, 1),
             },
         };
@@ -760,7 +788,7 @@ impl<'a> Interp<'a> {
             } else {
                 self.line.len()
             };
-        let mut block = std::mem::take(&mut self.block);
+        let mut block = self.take_block();
         block.offset = offset;
         let result = if self.line_length != 0 {
             self.parse_line(&mut block)
@@ -769,7 +797,7 @@ impl<'a> Interp<'a> {
             Ok(())
         };
         block.line_number = self.sequence_number;
-        self.block = block;
+        self.put_block(block);
         result.map(|_| ReadStatus::Ok)
     }
 
@@ -797,10 +825,22 @@ impl<'a> Interp<'a> {
         if !self.block.remappings.is_empty() {
             return self.execute_remapped_block();
         }
-        let mut block = std::mem::take(&mut self.block);
+        let mut block = self.take_block();
         let status = self.execute_block(&mut block);
-        self.block = block;
+        self.put_block(block);
         status
+    }
+
+    /// Take the current block out to work on it beside `self`.
+    pub fn take_block(&mut self) -> Box<Block> {
+        let spare = self.spare_block.take().unwrap_or_default();
+        std::mem::replace(&mut self.block, spare)
+    }
+
+    /// Put a block taken with [`Interp::take_block`] back.
+    pub fn put_block(&mut self, block: Box<Block>) {
+        let spare = std::mem::replace(&mut self.block, block);
+        self.spare_block = Some(spare);
     }
 
     /// Run one line: read it, then execute it.

@@ -433,10 +433,8 @@ pub fn run_rs274(interp: Interpreter<'_>, options: Rs274Options) -> Rs274Output 
     let mut stdout = String::new();
     let mut failed = false;
     let mut interp = interp;
-    let mut n = 0usize;
-    for item in interp.by_ref() {
-        n += 1;
-        if options.max_commands.is_some_and(|max| n > max) {
+    for (n, item) in interp.by_ref().enumerate() {
+        if options.max_commands.is_some_and(|max| n >= max) {
             let report = "stopped: too many commands (endless loop?)\n";
             out.stderr.push_str(report);
             out.merged.push_str(report);

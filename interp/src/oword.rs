@@ -212,7 +212,7 @@ impl Interp<'_> {
 
     /// Execute an O-word line (LinuxCNC's `convert_control_functions`).
     pub(crate) fn convert_control_functions(&mut self) -> R<ExecStatus> {
-        self.fault_word = Some((format!("O{}", self.block.o_name), self.block.o_col));
+        self.fault_word = Some((crate::interp::WordName::O, self.block.o_col));
         if self
             .skipping_o
             .as_deref()

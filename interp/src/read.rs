@@ -551,7 +551,7 @@ impl Interp<'_> {
             end += 1;
         }
         let text = &self.line[start..end];
-        let shown = String::from_utf8_lossy(text).into_owned();
+        let shown = || String::from_utf8_lossy(text).into_owned();
         // One optional sign, then digits with at most one point.
         let mut i = 0;
         if i < text.len() && (text[i] == b'+' || text[i] == b'-') {
@@ -573,17 +573,22 @@ impl Interp<'_> {
         if digits == 0 {
             return Err(self.fault_at(
                 start,
-                format!("bad number format (conversion failed) parsing '{shown}'"),
+                format!(
+                    "bad number format (conversion failed) parsing '{}'",
+                    shown()
+                ),
             ));
         }
         if i != text.len() {
             return Err(self.fault_at(
                 start,
-                format!("bad number format (trailing characters) parsing '{shown}'"),
+                format!(
+                    "bad number format (trailing characters) parsing '{}'",
+                    shown()
+                ),
             ));
         }
-        let body = std::str::from_utf8(&text[body_start..i]).unwrap_or("0");
-        let mut v: f64 = fast_parse(body);
+        let mut v: f64 = fast_parse(&text[body_start..i]);
         if text[0] == b'-' {
             v = -v;
         }
@@ -1406,8 +1411,7 @@ impl Interp<'_> {
 /// Parse an unsigned decimal number of digits and at most one point.
 /// Short ones (the common case) are assembled exactly from integers;
 /// longer ones go through the standard library's correctly rounded parser.
-fn fast_parse(s: &str) -> f64 {
-    let b = s.as_bytes();
+fn fast_parse(b: &[u8]) -> f64 {
     if b.len() <= 15 {
         let mut mantissa: u64 = 0;
         let mut frac_digits: i32 = 0;
@@ -1429,7 +1433,10 @@ fn fast_parse(s: &str) -> f64 {
         ];
         return mantissa as f64 / POW10[frac_digits as usize];
     }
-    s.parse().unwrap_or(0.0)
+    std::str::from_utf8(b)
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.0)
 }
 
 #[cfg(test)]
@@ -1449,8 +1456,8 @@ mod tests {
             "99999.99999",
             "0.0001",
         ] {
-            assert_eq!(fast_parse(s), s.parse::<f64>().unwrap(), "{s}");
+            assert_eq!(fast_parse(s.as_bytes()), s.parse::<f64>().unwrap(), "{s}");
         }
-        assert_eq!(fast_parse("3.14159265358979323846"), std::f64::consts::PI);
+        assert_eq!(fast_parse(b"3.14159265358979323846"), std::f64::consts::PI);
     }
 }

@@ -130,7 +130,7 @@ impl Interp<'_> {
             }
         }
         self.line_text_override = Some(format!("O <{}> call ", remap.ngc));
-        self.block = call;
+        *self.block = call;
         Ok(ExecStatus::Remap)
     }
 
@@ -234,7 +234,7 @@ impl Interp<'_> {
             self.remap_blocks.len() + 1 >= MAX_NESTED_REMAPS,
             "maximum nesting of remapped blocks exceeded"
         );
-        let mut cb = self.block.clone();
+        let mut cb = (*self.block).clone();
         cb.breadcrumbs = 0;
         cb.executing_remap = None;
         cb.line_number = self.sequence_number;
