@@ -88,7 +88,7 @@ fn lower_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> f64 {
     let mut moves: Vec<([f64; 3], [f64; 3], f64)> = Vec::new();
     let mut feed = 0.0;
     let mut at = [0.0; 3];
-    for c in Interpreter::new(program.as_bytes(), "bound", Position::ZERO) {
+    for c in Interpreter::from_text(program, "bound", Position::ZERO) {
         let c = c.expect("benchmark programs interpret");
         let (end, cap) = match c.cmd {
             CanonCmd::SetFeedRate { mm_per_min } => {
@@ -182,7 +182,7 @@ fn lower_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> f64 {
 fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     let t0 = Instant::now();
     let mut canon = 0usize;
-    for c in Interpreter::new(program.as_bytes(), name, Position::ZERO) {
+    for c in Interpreter::from_text(program, name, Position::ZERO) {
         c.unwrap();
         canon += 1;
     }
@@ -190,7 +190,7 @@ fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     let t0 = Instant::now();
     let mut planner = Planner::new(kins, Position::ZERO, PlannerConfig::default());
     let mut segments = 0usize;
-    for c in Interpreter::new(program.as_bytes(), name, Position::ZERO) {
+    for c in Interpreter::from_text(program, name, Position::ZERO) {
         planner.plan(&c.unwrap()).unwrap();
         while planner.next_segment().is_some() {
             segments += 1;
@@ -221,7 +221,7 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics) {
     };
     let t0 = Instant::now();
     let report = offline::run(
-        Interpreter::new(program.as_bytes(), name, Position::ZERO),
+        Interpreter::from_text(program, name, Position::ZERO),
         kins,
         Position::ZERO,
         config,

@@ -108,7 +108,7 @@ fn a_program_outside_the_travel_is_refused_and_nothing_moves() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("syntax.ngc:2:12: X: axis word repeated"),
+        err.contains("syntax.ngc:2:12: X: Multiple x words on one line"),
         "{err}"
     );
 }
@@ -189,7 +189,7 @@ fn the_cli_runs_a_program_and_reports_status() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("no program end"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no percent sign or program end"));
 
     let out = std::process::Command::new(kerf)
         .args([

@@ -53,7 +53,7 @@ fn ticks_through_a_program_without_allocating() {
 
     let program = "G21 G90 G0 X50 Y40 Z-10\nG1 X80 F900\nY60\nX70 Y70\nG4 P0.05\nG20 G91 G1 Y1 Z-0.1\nG0 X-1\nM2\n";
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
-    for canon in Interpreter::new(program.as_bytes(), "rt.ngc", Position::ZERO) {
+    for canon in Interpreter::from_text(program, "rt.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();
         while let Some(seg) = planner.next_segment() {
             producer.push(seg).unwrap();

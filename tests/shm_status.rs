@@ -19,7 +19,7 @@ fn a_subscriber_sees_every_tick_s_status() {
     let (mut producer, consumer) = rtrb::RingBuffer::new(64);
     let (_commands, command_queue) = rtrb::RingBuffer::new(4);
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
-    for canon in Interpreter::new("G0 X12 Y5 Z-3\nM2\n".as_bytes(), "shm.ngc", Position::ZERO) {
+    for canon in Interpreter::from_text("G0 X12 Y5 Z-3\nM2\n", "shm.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();
         while let Some(seg) = planner.next_segment() {
             producer.push(seg).unwrap();

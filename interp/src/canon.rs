@@ -3,6 +3,9 @@
 //!
 //! All positions are absolute machine coordinates: millimetres for linear
 //! axes, degrees for rotary axes, whatever units and offsets the program used.
+//! Commands that describe offsets (G5x, G92, rotation, tool length) are in the
+//! stream too, so that a consumer can show program coordinates or, as the
+//! LinuxCNC formatter in [`crate::linuxcnc`] does, convert moves back.
 
 use std::fmt;
 use std::sync::Arc;
@@ -153,11 +156,156 @@ impl Units {
     }
 }
 
-/// Where a canon command came from: the program file and its 1-based line.
+/// The plane of arcs, canned cycles and cutter compensation (G17 to G19.1).
+///
+/// Each plane names a first, second and normal axis, in LinuxCNC's order:
+/// XY (normal Z), YZ (normal X), XZ (first Z, second X, normal Y), and the
+/// same for U V W.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Plane {
+    /// G17: X then Y, normal Z.
+    XY,
+    /// G19: Y then Z, normal X.
+    YZ,
+    /// G18: Z then X, normal Y.
+    XZ,
+    /// G17.1: U then V, normal W.
+    UV,
+    /// G19.1: V then W, normal U.
+    VW,
+    /// G18.1: W then U, normal V.
+    UW,
+}
+
+impl Plane {
+    /// The first, second and normal axis of the plane.
+    pub fn axes(self) -> [Axis; 3] {
+        match self {
+            Plane::XY => [Axis::X, Axis::Y, Axis::Z],
+            Plane::YZ => [Axis::Y, Axis::Z, Axis::X],
+            Plane::XZ => [Axis::Z, Axis::X, Axis::Y],
+            Plane::UV => [Axis::U, Axis::V, Axis::W],
+            Plane::VW => [Axis::V, Axis::W, Axis::U],
+            Plane::UW => [Axis::W, Axis::U, Axis::V],
+        }
+    }
+
+    /// The G-code that selects this plane, e.g. `G18`.
+    pub fn gcode(self) -> &'static str {
+        match self {
+            Plane::XY => "G17",
+            Plane::YZ => "G19",
+            Plane::XZ => "G18",
+            Plane::UV => "G17.1",
+            Plane::VW => "G19.1",
+            Plane::UW => "G18.1",
+        }
+    }
+}
+
+/// Path-following mode (G61, G61.1, G64).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MotionMode {
+    /// G61.1: stop at the end of every move.
+    ExactStop,
+    /// G61: follow the programmed path exactly, blending nothing.
+    ExactPath,
+    /// G64: blend corners, deviating from the path by at most `tolerance`
+    /// mm (0 means as fast as possible).
+    Continuous { tolerance: f64 },
+}
+
+/// What a straight probe (G38.2 to G38.5) does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeKind {
+    /// True to move until the probe contacts (G38.2, G38.3), false to move
+    /// until it loses contact (G38.4, G38.5).
+    pub toward: bool,
+    /// True if reaching the end without a trip is an error (G38.2, G38.4).
+    pub error_if_no_trip: bool,
+}
+
+/// Spindle rotation direction, for M19 orientation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OrientDirection {
+    /// Rotate whichever way is shorter (M19 P0).
+    Either,
+    /// Rotate clockwise (M19 P1).
+    Clockwise,
+    /// Rotate counter-clockwise (M19 P2).
+    CounterClockwise,
+}
+
+/// One entry of the tool table, as written by G10 L1/L10/L11.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ToolData {
+    /// Tool number (T word).
+    pub tool: i32,
+    /// Pocket number in the tool changer.
+    pub pocket: i32,
+    /// Length (and lathe X) offsets in mm, degrees for A B C.
+    pub offset: Position,
+    /// Cutter diameter in mm.
+    pub diameter: f64,
+    /// Lathe tool front angle in degrees.
+    pub front_angle: f64,
+    /// Lathe tool back angle in degrees.
+    pub back_angle: f64,
+    /// Lathe tool orientation 0 to 9.
+    pub orientation: i32,
+}
+
+impl Default for ToolData {
+    fn default() -> Self {
+        ToolData {
+            tool: -1,
+            pocket: 0,
+            offset: Position::ZERO,
+            diameter: 0.0,
+            front_angle: 0.0,
+            back_angle: 0.0,
+            orientation: 0,
+        }
+    }
+}
+
+/// The N word at the start of a block as written (`N0010` keeps its width).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlockNumber {
+    /// The number; digits beyond what fits in a `u32` are dropped.
+    pub value: u32,
+    /// How many digits were written, leading zeros included (0 for a bare `N`).
+    pub digits: u8,
+}
+
+impl fmt::Display for BlockNumber {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.digits == 0 {
+            return f.write_str("N");
+        }
+        write!(f, "N{:0width$}", self.value, width = self.digits as usize)
+    }
+}
+
+/// Where a canon command came from: the program file, its 1-based line and
+/// the block's N word if the line starts with one. Line 0 marks the
+/// commands the interpreter gives at start-up, before it reads any line.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Source {
     pub file: Arc<str>,
     pub line: u32,
+    pub block: Option<BlockNumber>,
+}
+
+impl Source {
+    /// A source without an N word.
+    pub fn new(file: impl Into<Arc<str>>, line: u32) -> Source {
+        Source {
+            file: file.into(),
+            line,
+            block: None,
+        }
+    }
 }
 
 impl fmt::Display for Source {
@@ -173,28 +321,196 @@ pub struct Canon {
     pub cmd: CanonCmd,
 }
 
-/// A canonical machining command.
+/// A canonical machining command, in the spirit of LinuxCNC's canonical
+/// machining functions.
 ///
-/// Moves carry absolute machine coordinates (see [`Position`]); feed rates
-/// are in mm/min like the F word, converted from inches when G20 is active.
+/// Moves carry absolute machine coordinates (see [`Position`]): mm for X Y Z
+/// U V W and degrees for A B C, with units, work offsets, G92/G52, XY
+/// rotation and tool length offsets already applied. Other lengths are in mm,
+/// times in seconds, feed rates in mm per minute.
 #[derive(Clone, Debug, PartialEq)]
 pub enum CanonCmd {
-    /// The program switched length units (G20/G21). Informational: every
-    /// coordinate in the stream is already in mm.
+    // ---- program units and offsets (informational for motion) ----
+    /// The program switched length units (G20/G21). Every coordinate in the
+    /// stream is already in mm; formatters use this to print program units.
     UseLengthUnits(Units),
-    /// Feed rate for following feed moves, mm/min (or deg/min for pure rotary moves).
+    /// The active work offset changed: coordinate system `index` (1 = G54 …
+    /// 9 = G59.3) with its offset from machine zero in mm/degrees.
+    SetG5xOffset { index: u8, offset: Position },
+    /// The G92/G52 offset changed (mm/degrees; zero when not applied).
+    SetG92Offset { offset: Position },
+    /// The rotation of the work XY plane about the work origin, degrees CCW.
+    SetXYRotation { degrees: f64 },
+    /// The tool length offset in force (G43/G43.1/G43.2/G49), mm/degrees.
+    UseToolLengthOffset { offset: Position },
+    /// The plane for arcs and cycles changed (G17 to G19.1).
+    SelectPlane(Plane),
+
+    // ---- feeds and path control ----
+    /// Feed rate for following feed moves: mm/min (or deg/min for pure rotary
+    /// moves); mm per spindle revolution after
+    /// [`CanonCmd::SetFeedMode`] with `per_revolution`.
     SetFeedRate { mm_per_min: f64 },
+    /// Feed per minute (`per_revolution` false) or per revolution of `spindle`.
+    SetFeedMode { spindle: u32, per_revolution: bool },
+    /// Path-following mode (G61, G61.1, G64 P).
+    SetMotionControlMode(MotionMode),
+    /// Tolerance in mm for merging collinear small moves (G64 Q).
+    SetNaivecamTolerance { tolerance: f64 },
+    /// Trajectory planner choice (G64 … R, as in LinuxCNC 2.10): planner 0
+    /// is the default; planner 1 scales the peak acceleration it may use in
+    /// blends by `peak_scale` (0.1 to 1).
+    SetPlannerMode { planner: u8, peak_scale: f64 },
+
+    // ---- motion ----
     /// Rapid move (G0) in a straight line to `end`.
     StraightTraverse { end: Position },
     /// Feed move (G1) in a straight line to `end` at the current feed rate.
     StraightFeed { end: Position },
+    /// Feed move along a circular arc or helix (G2/G3) from the current
+    /// position to `end`.
+    ///
+    /// `center` holds the centre's coordinates on the plane's first and
+    /// second axes (see [`Plane::axes`]); `end` also gives the helix end on
+    /// the normal axis and the other axes, which move linearly. `turns` is
+    /// LinuxCNC's rotation: positive counter-clockwise (G3), negative
+    /// clockwise (G2) seen from the positive normal axis; its magnitude is 1
+    /// plus the number of extra full turns (P word).
+    ArcFeed {
+        end: Position,
+        center: [f64; 2],
+        plane: Plane,
+        turns: i32,
+    },
+    /// Probe move (G38.x) in a straight line towards `end`.
+    StraightProbe { end: Position, kind: ProbeKind },
+    /// Rigid tapping (G33.1, G84 on a spindle with an encoder): feed to `end`
+    /// synchronised with the spindle, reverse it, and return.
+    RigidTap { end: Position, scale: f64 },
+    /// Start spindle-synchronised motion: following feed moves advance
+    /// `mm_per_rev` per revolution of `spindle` (G33, G76).
+    StartSpeedFeedSync {
+        spindle: u32,
+        mm_per_rev: f64,
+        velocity_mode: bool,
+    },
+    /// End spindle-synchronised motion.
+    StopSpeedFeedSync,
     /// Dwell (G4) for a time in seconds.
     Dwell { seconds: f64 },
+
+    // ---- spindle ----
+    /// Spindle speed, revolutions per minute (or surface speed in CSS mode).
+    SetSpindleSpeed { spindle: u32, rpm: f64 },
+    /// Start the spindle clockwise (M3).
+    StartSpindleClockwise { spindle: u32 },
+    /// Start the spindle counter-clockwise (M4).
+    StartSpindleCounterclockwise { spindle: u32 },
+    /// Stop the spindle (M5).
+    StopSpindleTurning { spindle: u32 },
+    /// Constant-RPM (`css_max_rpm` 0, G97) or constant-surface-speed mode
+    /// (G96) with the given maximum speed.
+    SetSpindleMode { spindle: u32, css_max_rpm: f64 },
+    /// Orient the spindle to an angle in degrees (M19).
+    OrientSpindle {
+        spindle: u32,
+        degrees: f64,
+        direction: OrientDirection,
+    },
+    /// Wait up to `timeout` seconds for the spindle orientation to finish.
+    WaitSpindleOrientComplete { spindle: u32, timeout: f64 },
+
+    // ---- tools ----
+    /// Prepare tool `tool` in `pocket` for the next change (T word).
+    SelectTool { tool: i32, pocket: i32 },
+    /// A tool change is about to start (M6).
+    StartChange,
+    /// Change to the prepared tool (M6).
+    ChangeTool { tool: i32, pocket: i32 },
+    /// Declare `tool` to be in the spindle without changing (M61).
+    ChangeToolNumber { tool: i32 },
+    /// Write one tool table entry (G10 L1, L10, L11); `index` is the
+    /// entry's place in the table.
+    SetToolTableEntry { index: i32, data: ToolData },
+
+    // ---- coolant and overrides ----
+    /// Mist coolant on (M7).
+    MistOn,
+    /// Mist coolant off (M9).
+    MistOff,
+    /// Flood coolant on (M8).
+    FloodOn,
+    /// Flood coolant off (M9).
+    FloodOff,
+    /// Allow the feed override (M48, M50 P1).
+    EnableFeedOverride,
+    /// Ignore the feed override (M49, M50 P0).
+    DisableFeedOverride,
+    /// Allow the spindle speed override (M48, M51 P1).
+    EnableSpeedOverride { spindle: u32 },
+    /// Ignore the spindle speed override (M49, M51 P0).
+    DisableSpeedOverride { spindle: u32 },
+    /// Allow adaptive feed (M52 P1).
+    EnableAdaptiveFeed,
+    /// Ignore adaptive feed (M52 P0).
+    DisableAdaptiveFeed,
+    /// Allow feed hold (M53 P1).
+    EnableFeedHold,
+    /// Ignore feed hold (M53 P0).
+    DisableFeedHold,
+
+    // ---- inputs and outputs ----
+    /// Set digital output `index` synchronised with the next move (M62).
+    SetMotionOutputBit { index: u32 },
+    /// Clear digital output `index` synchronised with the next move (M63).
+    ClearMotionOutputBit { index: u32 },
+    /// Set analog output `index` synchronised with the next move (M67).
+    SetMotionOutputValue { index: u32, value: f64 },
+    /// Set digital output `index` now (M64).
+    SetAuxOutputBit { index: u32 },
+    /// Clear digital output `index` now (M65).
+    ClearAuxOutputBit { index: u32 },
+    /// Set analog output `index` now (M68).
+    SetAuxOutputValue { index: u32, value: f64 },
+    /// Wait on an input (M66): digital or analog `index`, `mode` 0 = now,
+    /// 1 = rise, 2 = fall, 3 = high, 4 = low; at most `timeout` seconds.
+    /// The result goes to parameter #5399 from the environment.
+    WaitInput {
+        index: u32,
+        digital: bool,
+        mode: u8,
+        timeout: f64,
+    },
+    /// Run user M-code program `M{number}` with its P and Q values (M100–M199).
+    UserMCode { number: u32, p: f64, q: f64 },
+
+    // ---- messages ----
     /// A plain comment `( ... )` or `; ...`.
     Comment(String),
-    /// An operator message `(MSG, ...)`.
+    /// An operator message `(MSG, ...)` or `(DEBUG, ...)`.
     Message(String),
-    /// Program end (M2, M30 or the closing `%`).
+    /// A `(LOG, ...)` line for the log file.
+    Log(String),
+    /// `(LOGOPEN, file)`: start a new log file.
+    LogOpen(String),
+    /// `(LOGAPPEND, file)`: append to a log file.
+    LogAppend(String),
+    /// `(LOGCLOSE)`.
+    LogClose,
+    /// `(PRINT, ...)`: text for the interpreter's console.
+    Print(String),
+
+    // ---- program flow ----
+    /// Pause until the operator resumes (M0).
+    ProgramStop,
+    /// Pause if the optional-stop switch is on (M1).
+    OptionalProgramStop,
+    /// Exchange pallets (M60), then pause.
+    PalletShuttle,
+    /// The end of motion that may be blended: wait for everything queued to
+    /// finish (a closing `%`).
+    Finish,
+    /// Program end (M2, M30).
     ProgramEnd,
 }
 
@@ -209,24 +525,183 @@ fn fmt_pos(f: &mut fmt::Formatter<'_>, p: &Position) -> fmt::Result {
     Ok(())
 }
 
+fn on_off(f: &mut fmt::Formatter<'_>, what: &str, on: bool) -> fmt::Result {
+    write!(f, "{what} {}", if on { "on" } else { "off" })
+}
+
 impl fmt::Display for CanonCmd {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        use CanonCmd::*;
         match self {
-            CanonCmd::UseLengthUnits(Units::Mm) => write!(f, "units mm"),
-            CanonCmd::UseLengthUnits(Units::Inch) => write!(f, "units inch"),
-            CanonCmd::SetFeedRate { mm_per_min } => write!(f, "feed {mm_per_min:.4} mm/min"),
-            CanonCmd::StraightTraverse { end } => {
+            UseLengthUnits(Units::Mm) => write!(f, "units mm"),
+            UseLengthUnits(Units::Inch) => write!(f, "units inch"),
+            SetG5xOffset { index, offset } => {
+                write!(f, "work offset {index} ")?;
+                fmt_pos(f, offset)
+            }
+            SetG92Offset { offset } => {
+                write!(f, "g92 offset ")?;
+                fmt_pos(f, offset)
+            }
+            SetXYRotation { degrees } => write!(f, "xy rotation {degrees:.4} deg"),
+            UseToolLengthOffset { offset } => {
+                write!(f, "tool offset ")?;
+                fmt_pos(f, offset)
+            }
+            SelectPlane(p) => write!(f, "plane {}", p.gcode()),
+            SetFeedRate { mm_per_min } => write!(f, "feed {mm_per_min:.4} mm/min"),
+            SetFeedMode {
+                spindle,
+                per_revolution,
+            } => {
+                if *per_revolution {
+                    write!(f, "feed per revolution of spindle {spindle}")
+                } else {
+                    write!(f, "feed per minute")
+                }
+            }
+            SetMotionControlMode(MotionMode::ExactStop) => write!(f, "exact stop"),
+            SetMotionControlMode(MotionMode::ExactPath) => write!(f, "exact path"),
+            SetMotionControlMode(MotionMode::Continuous { tolerance }) => {
+                write!(f, "blend tolerance {tolerance:.4} mm")
+            }
+            SetNaivecamTolerance { tolerance } => {
+                write!(f, "naivecam tolerance {tolerance:.4} mm")
+            }
+            SetPlannerMode {
+                planner,
+                peak_scale,
+            } => write!(f, "planner {planner} peak scale {peak_scale:.4}"),
+            StraightTraverse { end } => {
                 write!(f, "rapid ")?;
                 fmt_pos(f, end)
             }
-            CanonCmd::StraightFeed { end } => {
+            StraightFeed { end } => {
                 write!(f, "line ")?;
                 fmt_pos(f, end)
             }
-            CanonCmd::Dwell { seconds } => write!(f, "dwell {seconds:.4} s"),
-            CanonCmd::Comment(text) => write!(f, "comment {text:?}"),
-            CanonCmd::Message(text) => write!(f, "message {text:?}"),
-            CanonCmd::ProgramEnd => write!(f, "program end"),
+            ArcFeed {
+                end,
+                center,
+                plane,
+                turns,
+            } => {
+                let [a, b, _] = plane.axes();
+                write!(f, "arc ")?;
+                fmt_pos(f, end)?;
+                write!(
+                    f,
+                    " centre {a}{:.4} {b}{:.4} plane {} turns {turns}",
+                    center[0],
+                    center[1],
+                    plane.gcode()
+                )
+            }
+            StraightProbe { end, kind } => {
+                write!(f, "probe {} ", if kind.toward { "toward" } else { "away" })?;
+                fmt_pos(f, end)
+            }
+            RigidTap { end, scale } => {
+                write!(f, "rigid tap ")?;
+                fmt_pos(f, end)?;
+                write!(f, " scale {scale:.4}")
+            }
+            StartSpeedFeedSync {
+                spindle,
+                mm_per_rev,
+                velocity_mode,
+            } => write!(
+                f,
+                "spindle {spindle} sync {mm_per_rev:.4} mm/rev{}",
+                if *velocity_mode { " (velocity)" } else { "" }
+            ),
+            StopSpeedFeedSync => write!(f, "spindle sync off"),
+            Dwell { seconds } => write!(f, "dwell {seconds:.4} s"),
+            SetSpindleSpeed { spindle, rpm } => write!(f, "spindle {spindle} speed {rpm:.4}"),
+            StartSpindleClockwise { spindle } => write!(f, "spindle {spindle} cw"),
+            StartSpindleCounterclockwise { spindle } => write!(f, "spindle {spindle} ccw"),
+            StopSpindleTurning { spindle } => write!(f, "spindle {spindle} stop"),
+            SetSpindleMode {
+                spindle,
+                css_max_rpm,
+            } => {
+                if *css_max_rpm > 0.0 {
+                    write!(
+                        f,
+                        "spindle {spindle} constant surface speed, max {css_max_rpm:.4} rpm"
+                    )
+                } else {
+                    write!(f, "spindle {spindle} constant rpm")
+                }
+            }
+            OrientSpindle {
+                spindle,
+                degrees,
+                direction,
+            } => write!(f, "spindle {spindle} orient {degrees:.4} deg {direction:?}"),
+            WaitSpindleOrientComplete { spindle, timeout } => {
+                write!(f, "spindle {spindle} wait orient {timeout:.4} s")
+            }
+            SelectTool { tool, pocket } => write!(f, "select tool {tool} (pocket {pocket})"),
+            StartChange => write!(f, "tool change starts"),
+            ChangeTool { tool, pocket } => write!(f, "change tool {tool} (pocket {pocket})"),
+            ChangeToolNumber { tool } => write!(f, "tool in spindle is {tool}"),
+            SetToolTableEntry { index, data } => {
+                write!(f, "tool table [{index}] T{} P{} ", data.tool, data.pocket)?;
+                fmt_pos(f, &data.offset)?;
+                write!(
+                    f,
+                    " D{:.4} front {:.4} back {:.4} orientation {}",
+                    data.diameter, data.front_angle, data.back_angle, data.orientation
+                )
+            }
+            MistOn => on_off(f, "mist", true),
+            MistOff => on_off(f, "mist", false),
+            FloodOn => on_off(f, "flood", true),
+            FloodOff => on_off(f, "flood", false),
+            EnableFeedOverride => on_off(f, "feed override", true),
+            DisableFeedOverride => on_off(f, "feed override", false),
+            EnableSpeedOverride { spindle } => {
+                on_off(f, &format!("spindle {spindle} override"), true)
+            }
+            DisableSpeedOverride { spindle } => {
+                on_off(f, &format!("spindle {spindle} override"), false)
+            }
+            EnableAdaptiveFeed => on_off(f, "adaptive feed", true),
+            DisableAdaptiveFeed => on_off(f, "adaptive feed", false),
+            EnableFeedHold => on_off(f, "feed hold", true),
+            DisableFeedHold => on_off(f, "feed hold", false),
+            SetMotionOutputBit { index } => write!(f, "output {index} on with motion"),
+            ClearMotionOutputBit { index } => write!(f, "output {index} off with motion"),
+            SetMotionOutputValue { index, value } => {
+                write!(f, "analog output {index} = {value:.4} with motion")
+            }
+            SetAuxOutputBit { index } => write!(f, "output {index} on"),
+            ClearAuxOutputBit { index } => write!(f, "output {index} off"),
+            SetAuxOutputValue { index, value } => write!(f, "analog output {index} = {value:.4}"),
+            WaitInput {
+                index,
+                digital,
+                mode,
+                timeout,
+            } => write!(
+                f,
+                "wait {} input {index} mode {mode} timeout {timeout:.4} s",
+                if *digital { "digital" } else { "analog" }
+            ),
+            UserMCode { number, p, q } => write!(f, "user M{number} P{p} Q{q}"),
+            Comment(text) => write!(f, "comment {text:?}"),
+            Message(text) => write!(f, "message {text:?}"),
+            Log(text) => write!(f, "log {text:?}"),
+            LogOpen(text) => write!(f, "log open {text:?}"),
+            LogAppend(text) => write!(f, "log append {text:?}"),
+            LogClose => write!(f, "log close"),
+            Print(text) => write!(f, "print {text:?}"),
+            ProgramStop => write!(f, "program stop"),
+            OptionalProgramStop => write!(f, "optional stop"),
+            PalletShuttle => write!(f, "pallet shuttle"),
+            Finish => write!(f, "finish"),
+            ProgramEnd => write!(f, "program end"),
         }
     }
 }

@@ -1,18 +1,46 @@
-//! kerf-interp: the RS274NGC interpreter.
+//! kerf-interp: the RS274NGC interpreter, in LinuxCNC's dialect.
 //!
-//! Text goes in, [`Canon`] commands come out. The interpreter is pure: it has
-//! no threads, clocks or knowledge of the machine beyond its starting
-//! [`Position`]. It streams: [`Interpreter`] is an iterator that reads one
-//! block at a time, so memory stays flat however long the program is.
+//! Text goes in, [`Canon`] commands come out. The interpreter is pure: no
+//! threads or clocks, and it learns about the machine only through its
+//! [`Config`] and the queries of an [`Environment`]. It streams:
+//! [`Interpreter`] is an iterator that reads one line at a time as the
+//! consumer asks for commands, so memory stays flat however long the
+//! program is (O-word loops and calls seek back in the file).
 //!
-//! Every canon command carries its [`Source`] (file and line), and every
-//! error names file, line, column and the word at fault.
+//! Every canon command carries its [`Source`] (file, line, N word), and
+//! every error names file, line, column and the word at fault. The
+//! [`linuxcnc`] module prints the stream in the text format of LinuxCNC's
+//! stand-alone interpreter `rs274`.
 
+// Positions are parallel arrays indexed by axis (X..W); index loops over
+// them read more plainly than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
+mod block;
 pub mod canon;
+mod comp;
+pub mod config;
+mod cycles;
+mod emit;
 pub mod error;
-mod interpreter;
-mod lex;
+mod exec;
+mod g7x;
+pub mod ini;
+mod interp;
+pub mod linuxcnc;
+mod motion;
+mod oword;
+pub mod paramfile;
+mod params;
+mod read;
+mod remap;
+pub mod tools;
 
-pub use canon::{Axis, Canon, CanonCmd, Position, Source, Units};
+pub use canon::{
+    Axis, BlockNumber, Canon, CanonCmd, MotionMode, OrientDirection, Plane, Position, ProbeKind,
+    Source, ToolData, Units,
+};
+pub use config::{Config, Environment, Offline, ProbeOutcome, Remap};
 pub use error::InterpError;
-pub use interpreter::Interpreter;
+pub use interp::{Ending, Interpreter, ProgramSource};
+pub use tools::ToolTable;

@@ -997,7 +997,7 @@ mod simulation {
                 ..Default::default()
             },
         );
-        for c in Interpreter::new(text.as_bytes(), "t.ngc", Position::ZERO) {
+        for c in Interpreter::from_text(text, "t.ngc", Position::ZERO) {
             p.plan(&c.unwrap()).unwrap();
         }
         p.finish();

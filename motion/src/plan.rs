@@ -11,7 +11,7 @@
 
 use std::collections::VecDeque;
 
-use kerf_interp::{Axis, Canon, CanonCmd, Position, Source};
+use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::path::{norm, Arc, Blend, Line, Shape, Vec9};
@@ -170,8 +170,12 @@ pub struct Planner<'k> {
     /// Joints that need sampling through the kinematics (false: all joints are axes).
     sample_joints: bool,
     mode: PathMode,
-    /// Programmed feed, mm/s.
-    feed: f64,
+    /// The F word, mm/min (mm/rev in feed-per-revolution mode).
+    feed_word: f64,
+    /// G95: feed per spindle revolution.
+    per_revolution: bool,
+    /// Programmed spindle speed, rev/min.
+    spindle_rpm: f64,
     position: Position,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
@@ -250,7 +254,9 @@ impl<'k> Planner<'k> {
             limits,
             sample_joints,
             mode: config.mode,
-            feed: 0.0,
+            feed_word: 0.0,
+            per_revolution: false,
+            spindle_rpm: 0.0,
             position: start,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
@@ -287,8 +293,24 @@ impl<'k> Planner<'k> {
     /// check can report every violation of a program.
     pub fn plan(&mut self, canon: &Canon) -> Result<(), PlanError> {
         let line = canon.source.line;
+        let unsupported = |what: &str| {
+            Err(self.error(canon, format!("{what} is not supported by the planner yet")))
+        };
         match &canon.cmd {
-            CanonCmd::SetFeedRate { mm_per_min } => self.feed = mm_per_min / 60.0,
+            CanonCmd::SetFeedRate { mm_per_min } => self.feed_word = *mm_per_min,
+            CanonCmd::SetFeedMode { per_revolution, .. } => self.per_revolution = *per_revolution,
+            CanonCmd::SetSpindleSpeed { rpm, .. } => self.spindle_rpm = *rpm,
+            CanonCmd::SetMotionControlMode(mode) => {
+                self.mode = match *mode {
+                    MotionMode::ExactStop => PathMode::ExactStop,
+                    MotionMode::ExactPath => PathMode::ExactPath,
+                    // G64 without P: as fast as the segment lengths allow.
+                    MotionMode::Continuous { tolerance } if tolerance <= 0.0 => PathMode::Blend {
+                        tolerance: f64::INFINITY,
+                    },
+                    MotionMode::Continuous { tolerance } => PathMode::Blend { tolerance },
+                }
+            }
             CanonCmd::Dwell { seconds } => {
                 self.finish();
                 self.ready.push_back(Segment::marker(
@@ -299,10 +321,95 @@ impl<'k> Planner<'k> {
             }
             CanonCmd::StraightTraverse { end } => self.line(canon, SegmentKind::Rapid, *end)?,
             CanonCmd::StraightFeed { end } => self.line(canon, SegmentKind::Feed, *end)?,
-            CanonCmd::ProgramEnd => self.finish(),
-            CanonCmd::UseLengthUnits(_) | CanonCmd::Comment(_) | CanonCmd::Message(_) => {}
+            CanonCmd::ArcFeed {
+                end,
+                center,
+                plane,
+                turns,
+            } => {
+                let [first, second, _] = plane.axes();
+                let arc = Arc::from_program(
+                    &self.position.to_array(),
+                    &end.to_array(),
+                    (first.index(), second.index()),
+                    (center[0], center[1]),
+                    *turns,
+                );
+                self.arc(canon, arc)?;
+            }
+            // The machine comes to rest: program end, and the program stops
+            // (M0, M1, M60) that the daemon turns into a pause.
+            CanonCmd::ProgramEnd
+            | CanonCmd::ProgramStop
+            | CanonCmd::OptionalProgramStop
+            | CanonCmd::PalletShuttle
+            | CanonCmd::Finish => self.finish(),
+            CanonCmd::StraightProbe { .. } => return unsupported("a probe move (G38.x)"),
+            CanonCmd::RigidTap { .. } => return unsupported("rigid tapping (G33.1, G84 rigid)"),
+            CanonCmd::StartSpeedFeedSync { .. } => {
+                return unsupported("spindle-synchronised motion (G33, G76)")
+            }
+            CanonCmd::WaitInput { .. } => return unsupported("waiting on an input (M66)"),
+            // Offsets and modes the interpreter has already applied to every
+            // position, and commands for other parts of the machine.
+            CanonCmd::UseLengthUnits(_)
+            | CanonCmd::Comment(_)
+            | CanonCmd::Message(_)
+            | CanonCmd::SetG5xOffset { .. }
+            | CanonCmd::SetG92Offset { .. }
+            | CanonCmd::SetXYRotation { .. }
+            | CanonCmd::UseToolLengthOffset { .. }
+            | CanonCmd::SelectPlane(_)
+            | CanonCmd::SetNaivecamTolerance { .. }
+            | CanonCmd::SetPlannerMode { .. }
+            | CanonCmd::StopSpeedFeedSync
+            | CanonCmd::StartSpindleClockwise { .. }
+            | CanonCmd::StartSpindleCounterclockwise { .. }
+            | CanonCmd::StopSpindleTurning { .. }
+            | CanonCmd::SetSpindleMode { .. }
+            | CanonCmd::OrientSpindle { .. }
+            | CanonCmd::WaitSpindleOrientComplete { .. }
+            | CanonCmd::SelectTool { .. }
+            | CanonCmd::StartChange
+            | CanonCmd::ChangeTool { .. }
+            | CanonCmd::ChangeToolNumber { .. }
+            | CanonCmd::SetToolTableEntry { .. }
+            | CanonCmd::MistOn
+            | CanonCmd::MistOff
+            | CanonCmd::FloodOn
+            | CanonCmd::FloodOff
+            | CanonCmd::EnableFeedOverride
+            | CanonCmd::DisableFeedOverride
+            | CanonCmd::EnableSpeedOverride { .. }
+            | CanonCmd::DisableSpeedOverride { .. }
+            | CanonCmd::EnableAdaptiveFeed
+            | CanonCmd::DisableAdaptiveFeed
+            | CanonCmd::EnableFeedHold
+            | CanonCmd::DisableFeedHold
+            | CanonCmd::SetMotionOutputBit { .. }
+            | CanonCmd::ClearMotionOutputBit { .. }
+            | CanonCmd::SetMotionOutputValue { .. }
+            | CanonCmd::SetAuxOutputBit { .. }
+            | CanonCmd::ClearAuxOutputBit { .. }
+            | CanonCmd::SetAuxOutputValue { .. }
+            | CanonCmd::UserMCode { .. }
+            | CanonCmd::Log(_)
+            | CanonCmd::LogOpen(_)
+            | CanonCmd::LogAppend(_)
+            | CanonCmd::LogClose
+            | CanonCmd::Print(_) => {}
         }
         Ok(())
+    }
+
+    /// The programmed path speed for feed moves, mm/s: the F word, or F
+    /// times the spindle speed in feed-per-revolution mode (G95).
+    fn feed(&self) -> f64 {
+        if self.per_revolution {
+            self.feed_word * self.spindle_rpm / 60.0
+        } else {
+            self.feed_word / 60.0
+        }
     }
 
     fn error(&self, canon: &Canon, message: String) -> PlanError {
@@ -373,8 +480,13 @@ impl<'k> Planner<'k> {
         if line.length() == 0.0 {
             return Ok(());
         }
-        if kind == SegmentKind::Feed && self.feed <= 0.0 {
-            return Err(self.error(canon, "feed move with a zero feed rate".into()));
+        if kind == SegmentKind::Feed && self.feed() <= 0.0 {
+            let why = if self.per_revolution {
+                "feed move in feed-per-revolution mode with the spindle speed at zero"
+            } else {
+                "feed move with a zero feed rate"
+            };
+            return Err(self.error(canon, why.into()));
         }
         let segment = self.segment(kind, canon.source.line, shape);
         self.pending.push_back(Pending {
@@ -394,7 +506,7 @@ impl<'k> Planner<'k> {
         let shape = Shape::Arc(arc);
         self.position = Position::from_array(shape.end());
         self.check_shape(canon, &shape)?;
-        if self.feed <= 0.0 {
+        if self.feed() <= 0.0 {
             return Err(self.error(canon, "arc with a zero feed rate".into()));
         }
         let segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
@@ -640,7 +752,7 @@ impl<'k> Planner<'k> {
     fn segment(&self, kind: SegmentKind, line: u32, shape: Shape) -> Segment {
         let length = shape.length();
         let feed = match kind {
-            SegmentKind::Feed => self.feed,
+            SegmentKind::Feed => self.feed(),
             _ => f64::INFINITY,
         };
         let (v, a, j) = self.path_limits(&shape, length);
@@ -841,7 +953,7 @@ mod tests {
 
     fn plan(kins: &dyn Kinematics, config: PlannerConfig, text: &str) -> Vec<Segment> {
         let mut p = Planner::new(kins, Position::ZERO, config);
-        for c in Interpreter::new(text.as_bytes(), "t.ngc", Position::ZERO) {
+        for c in Interpreter::from_text(text, "t.ngc", Position::ZERO) {
             p.plan(&c.unwrap()).unwrap();
         }
         p.finish();
@@ -927,10 +1039,7 @@ mod tests {
         let k = xyz(1000.0, 1000.0, 1e5);
         let mut p = Planner::new(&k, Position::xyz(10.0, 0.0, 0.0), PlannerConfig::default());
         let canon = Canon {
-            source: Source {
-                file: "t".into(),
-                line: 1,
-            },
+            source: Source::new("t", 1),
             cmd: CanonCmd::SetFeedRate {
                 mm_per_min: 60000.0,
             },

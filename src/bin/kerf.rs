@@ -35,6 +35,19 @@ enum Cmd {
     },
     /// Interpret a program offline and print its canon commands.
     Canon {
+        /// Output format: `readable` (machine mm, one command per line) or
+        /// `linuxcnc` (the text of LinuxCNC's stand-alone interpreter rs274).
+        #[arg(long, value_name = "FORMAT", default_value = "readable")]
+        format: CanonFormat,
+        /// LinuxCNC tool table file (.tbl).
+        #[arg(long, value_name = "FILE")]
+        tool_table: Option<PathBuf>,
+        /// Parameter file (.var): read at start, written back at program end.
+        #[arg(long, value_name = "FILE")]
+        params: Option<PathBuf>,
+        /// LinuxCNC INI file for [RS274NGC] settings (subroutine path, remaps).
+        #[arg(long, value_name = "FILE")]
+        ini: Option<PathBuf>,
         /// The program file.
         file: PathBuf,
     },
@@ -111,6 +124,13 @@ enum KinsDirection {
     },
 }
 
+/// Output formats of `kerf canon`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum CanonFormat {
+    Readable,
+    Linuxcnc,
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     let socket = args
@@ -120,7 +140,24 @@ fn main() -> ExitCode {
     let result = match args.command {
         Cmd::Status { json } => cli::status::status(&socket, json),
         Cmd::Run { file } => cli::run::run(&socket, &file),
-        Cmd::Canon { file } => cli::canon::canon(&file),
+        Cmd::Canon {
+            format,
+            tool_table,
+            params,
+            ini,
+            file,
+        } => cli::canon::canon(
+            &file,
+            &cli::canon::CanonOptions {
+                format: match format {
+                    CanonFormat::Readable => cli::canon::Format::Readable,
+                    CanonFormat::Linuxcnc => cli::canon::Format::Linuxcnc,
+                },
+                tool_table,
+                params,
+                ini,
+            },
+        ),
         Cmd::Check {
             file,
             machine,

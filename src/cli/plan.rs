@@ -15,10 +15,7 @@ fn load(machine: &str) -> Result<kerf_machines::Machine, Failure> {
     kerf_machines::load(machine).map_err(|e| Failure::new(e.to_string()))
 }
 
-fn open(
-    file: &Path,
-    start: Position,
-) -> Result<Interpreter<std::io::BufReader<std::fs::File>>, Failure> {
+fn open(file: &Path, start: Position) -> Result<Interpreter<'static>, Failure> {
     Interpreter::open(file, start).map_err(|e| Failure::new(format!("{}: {e}", file.display())))
 }
 
