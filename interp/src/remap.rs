@@ -217,7 +217,7 @@ impl Interp<'_> {
             return Ok(());
         };
         let spec = self.cfg.remaps[r].argspec.clone();
-        if spec.as_deref().map_or(true, |s| s.contains('@')) {
+        if spec.as_deref().is_none_or(|s| s.contains('@')) {
             return Ok(());
         }
         let cb = cb.clone();
