@@ -6,37 +6,21 @@ use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
 
 use kerf::client::{Client, ClientError};
-use kerf::protocol::{Command, ErrorCode, Event, MachineState, ProgramState, Status};
-use support::Kerfd;
+use kerf::protocol::{Command, ErrorCode, MachineState, ProgramState, Status};
+use support::{axis, status, Kerfd};
 
-fn status(client: &mut Client) -> Status {
-    serde_json::from_value(client.request(&Command::Status).unwrap()).unwrap()
-}
-
-fn axis(status: &Status, key: &str) -> f64 {
-    status.position[key].as_f64().unwrap()
+fn run_cmd(path: &std::path::Path) -> Command {
+    Command::Run {
+        path: Some(path.display().to_string()),
+        line: None,
+    }
 }
 
 /// Run a program and follow status events until it is no longer running.
 fn run_to_end(client: &mut Client, path: &std::path::Path) -> Status {
-    let reply = client
-        .request(&Command::Run {
-            path: path.display().to_string(),
-        })
-        .unwrap();
+    let reply = client.request(&run_cmd(path)).unwrap();
     let id = reply["program"].as_u64().unwrap() as u32;
-    client
-        .request(&Command::Subscribe { rate_hz: 50.0 })
-        .unwrap();
-    loop {
-        let Event::Status { status } = client.next_event().unwrap();
-        if let Some(p) = &status.program {
-            if p.id == id && p.state != ProgramState::Running {
-                client.request(&Command::Unsubscribe).unwrap();
-                return status;
-            }
-        }
-    }
+    client.wait_job(id, 50.0, |_| {}).unwrap()
 }
 
 #[test]
@@ -58,7 +42,7 @@ fn inch_and_incremental_program_ends_at_the_computed_position() {
     // X: 10 + 25.4 - 12.7 = 22.7, then absolute 12.5.
     // Y: 10 + 12.7 + 25.4 = 48.1, then + 0.25 mm = 48.35.
     // Z: -5 - 6.35 = -11.35.
-    let mut client = Client::connect(&kerfd.socket).unwrap();
+    let mut client = kerfd.ready_client();
     let end = run_to_end(&mut client, &program);
     let p = end.program.as_ref().unwrap();
     assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);
@@ -77,17 +61,13 @@ fn inch_and_incremental_program_ends_at_the_computed_position() {
 #[test]
 fn a_program_outside_the_travel_is_refused_and_nothing_moves() {
     let kerfd = Kerfd::start(&[]);
-    let mut client = Client::connect(&kerfd.socket).unwrap();
+    let mut client = kerfd.ready_client();
     let ok = kerfd.program("ok.ngc", "G0 X5 Y6 Z-7\nM2\n");
     run_to_end(&mut client, &ok);
     let before = status(&mut client);
 
     let bad = kerfd.program("bad.ngc", "G0 X20\nG1 Y10 F100\nG1 Z-150\nM2\n");
-    let err = client
-        .request(&Command::Run {
-            path: bad.display().to_string(),
-        })
-        .unwrap_err();
+    let err = client.request(&run_cmd(&bad)).unwrap_err();
     match err {
         ClientError::Refused { code, message } => {
             assert_eq!(code, ErrorCode::ProgramError);
@@ -101,12 +81,7 @@ fn a_program_outside_the_travel_is_refused_and_nothing_moves() {
     assert_eq!(after.state, MachineState::Idle);
 
     let syntax = kerfd.program("syntax.ngc", "G0 X1\nG1 X2 F100 X3\nM2\n");
-    let err = client
-        .request(&Command::Run {
-            path: syntax.display().to_string(),
-        })
-        .unwrap_err()
-        .to_string();
+    let err = client.request(&run_cmd(&syntax)).unwrap_err().to_string();
     assert!(
         err.contains("syntax.ngc:2:12: X: axis word repeated"),
         "{err}"
@@ -132,6 +107,7 @@ fn garbage_gets_an_error_and_the_connection_stays_usable() {
     for _ in 0..4 {
         let mut line = String::new();
         reader.read_line(&mut line).unwrap();
+        support::schema().check_server_line(&line, Some("hello"));
         replies.push(serde_json::from_str::<serde_json::Value>(&line).unwrap());
     }
     assert_eq!(replies[0]["error"]["code"], "parse_error");
@@ -147,6 +123,26 @@ fn the_cli_runs_a_program_and_reports_status() {
     let kerfd = Kerfd::start(&[]);
     let program = kerfd.program("cli.ngc", "G21 G90\nG1 X3 Y4 F3000\nM30\n");
     let kerf = env!("CARGO_BIN_EXE_kerf");
+    let cli = |args: &[&str]| {
+        std::process::Command::new(kerf)
+            .args(args)
+            .args(["--socket", kerfd.socket.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    // A fresh daemon is in e-stop: `kerf run` says what to do.
+    let out = cli(&["run", program.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("e-stop") && err.contains("`reset`"), "{err}");
+    for step in [["reset"], ["on"], ["home"]] {
+        let out = cli(&step);
+        assert!(
+            out.status.success(),
+            "{step:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
     let out = std::process::Command::new(kerf)
         .args([
             "run",

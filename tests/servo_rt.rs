@@ -70,6 +70,8 @@ fn ticks_through_a_program_without_allocating() {
 
     let mut tick =
         ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
+    tick.set_following_error_limits(&[Some(0.1), Some(0.1), None]);
+    commands.push(ServoCommand::Enable(true)).unwrap();
     COUNTING.with(|c| c.set(true));
     let mut ticks = 0u64;
     while tick.snapshot().program_done != 1 && ticks < 1_000_000 {
