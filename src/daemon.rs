@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use kerf_interp::{Axis, Canon, CanonCmd, Interpreter, Position, Source};
 use kerf_machines::Machine;
-use kerf_motion::{Kinematics, Planner, PlannerConfig, Segment, SegmentKind};
+use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment, SegmentKind};
 use serde_json::{json, Map, Value};
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, UnixListener};
@@ -1246,7 +1246,23 @@ async fn start_job(
     let stream_shared = shared.clone();
     std::thread::Builder::new()
         .name(format!("kerf-plan-{tag}"))
-        .spawn(move || stream(stream_shared, feed, tag, source, start, from_line, cancel))
+        .spawn(move || {
+            let mut config = stream_shared.planner;
+            if single_block {
+                // Stepping stops at every block end, as LinuxCNC does: no
+                // corner blend may span two blocks.
+                config.mode = PathMode::ExactStop;
+            }
+            let job = Stream {
+                tag,
+                source,
+                start,
+                from_line,
+                config,
+                cancel,
+            };
+            stream(stream_shared, feed, job)
+        })
         .map_err(|e| {
             (
                 ErrorCode::IoError,
@@ -1329,20 +1345,30 @@ async fn check_file(
     .await
 }
 
-/// The planner thread of one job: interpret (for files) and plan just
-/// ahead of the servo, feeding its queue, then the job's `Stop` marker.
-fn stream(
-    shared: Arc<Shared>,
-    mut feed: Feed,
+/// What a planner thread streams.
+struct Stream {
     tag: u32,
     source: JobSource,
     start: Position,
     from_line: u32,
+    config: PlannerConfig,
     cancel: Arc<AtomicBool>,
-) {
+}
+
+/// The planner thread of one job: interpret (for files) and plan just
+/// ahead of the servo, feeding its queue, then the job's `Stop` marker.
+fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
+    let Stream {
+        tag,
+        source,
+        start,
+        from_line,
+        config,
+        cancel,
+    } = job;
     let mut failure = None;
     let mut last_line = 0;
-    let mut planner = Planner::new(&*shared.kins, start, shared.planner);
+    let mut planner = Planner::new(&*shared.kins, start, config);
     let canons: Box<dyn Iterator<Item = Result<Canon, String>>> = match source {
         JobSource::Canons(c) => Box::new(c.into_iter().map(Ok)),
         JobSource::File(path) => match Interpreter::open(&path, start) {

@@ -209,3 +209,529 @@ fn a_second_daemon_on_the_same_socket_is_refused() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("already listening"));
 }
+
+// ---------------------------------------------------------------------------
+// Machine states, motion commands and events through the real socket.
+
+use kerf::protocol::{Event, Execution, Fields, JointRef};
+
+/// Subscribe `client` to status at `rate_hz` (and machine events).
+fn subscribe(client: &mut Client, rate_hz: f64) {
+    client
+        .request(&Command::Subscribe {
+            rate_hz: Some(rate_hz),
+            fields: Fields::Full,
+            events: true,
+        })
+        .unwrap();
+}
+
+/// The next status event, skipping other events.
+fn next_status(client: &mut Client) -> Status {
+    loop {
+        if let Event::Status { status } = client.next_event().unwrap() {
+            return status;
+        }
+    }
+}
+
+/// Status events until `pred` holds; returns every status seen, the last
+/// one satisfying `pred`.
+fn statuses_until(client: &mut Client, pred: impl Fn(&Status) -> bool) -> Vec<Status> {
+    let mut seen = Vec::new();
+    loop {
+        let s = next_status(client);
+        let done = pred(&s);
+        seen.push(s);
+        if done {
+            return seen;
+        }
+    }
+}
+
+fn code_of(e: ClientError) -> (ErrorCode, String) {
+    match e {
+        ClientError::Refused { code, message } => (code, message),
+        other => panic!("expected a refusal, got {other}"),
+    }
+}
+
+fn job_ended(s: &Status, id: u32) -> bool {
+    s.job
+        .as_ref()
+        .is_some_and(|j| j.id == id && j.state != ProgramState::Running)
+}
+
+#[test]
+fn the_power_up_sequence_is_enforced_with_reasons() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.client();
+    let mut watcher = kerfd.client();
+    watcher
+        .request(&Command::Subscribe {
+            rate_hz: None,
+            fields: Fields::Full,
+            events: true,
+        })
+        .unwrap();
+    assert_eq!(status(&mut c).state, MachineState::Estop);
+    let program = kerfd.program("p.ngc", "G0 X1\nM2\n");
+    let (code, msg) = code_of(c.request(&run_cmd(&program)).unwrap_err());
+    assert_eq!(code, ErrorCode::InvalidState);
+    assert!(msg.contains("e-stop"), "{msg}");
+    let (code, msg) = code_of(c.request(&Command::On).unwrap_err());
+    assert_eq!(code, ErrorCode::InvalidState);
+    assert!(msg.contains("`reset` first"), "{msg}");
+    c.request(&Command::Reset).unwrap();
+    assert_eq!(status(&mut c).state, MachineState::EstopReset);
+    assert_eq!(
+        code_of(c.request(&Command::Reset).unwrap_err()).0,
+        ErrorCode::InvalidState
+    );
+    c.request(&Command::On).unwrap();
+    assert_eq!(status(&mut c).state, MachineState::On);
+    assert_eq!(
+        code_of(c.request(&Command::On).unwrap_err()).1,
+        "the machine is already on"
+    );
+    let (code, msg) = code_of(
+        c.request(&Command::Mdi {
+            line: "G0 X1".into(),
+        })
+        .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidState);
+    assert_eq!(
+        msg,
+        "cannot run MDI: joints x, y, z are not homed; `home` first"
+    );
+    assert_eq!(
+        code_of(c.request(&Command::Pause).unwrap_err()).0,
+        ErrorCode::InvalidState
+    );
+    assert_eq!(
+        code_of(c.request(&Command::Abort).unwrap_err()).0,
+        ErrorCode::InvalidState
+    );
+    let id = c.request(&Command::Home { joint: None }).unwrap()["home"]
+        .as_u64()
+        .unwrap() as u32;
+    let end = c.wait_job(id, 100.0, |_| {}).unwrap();
+    assert_eq!(end.state, MachineState::Idle);
+    assert_eq!(end.homed, vec![true, true, true]);
+    c.request(&Command::Off).unwrap();
+    c.request(&Command::On).unwrap();
+    assert_eq!(
+        status(&mut c).state,
+        MachineState::Idle,
+        "homing survives off"
+    );
+    c.request(&Command::Estop).unwrap();
+    assert_eq!(status(&mut c).state, MachineState::Estop);
+
+    // The watcher saw every transition, in order, with reasons.
+    let mut states = Vec::new();
+    while states.last() != Some(&MachineState::Estop) || states.len() < 2 {
+        if let Event::State { state, reason, .. } = watcher.next_event().unwrap() {
+            assert!(reason.is_some(), "a state event without a reason");
+            states.push(state);
+        }
+    }
+    assert_eq!(
+        states,
+        vec![
+            MachineState::EstopReset,
+            MachineState::On,
+            MachineState::Homing,
+            MachineState::Idle,
+            MachineState::EstopReset,
+            MachineState::Idle,
+            MachineState::Estop
+        ]
+    );
+}
+
+#[test]
+fn pause_and_resume_mid_move_keep_the_position_continuous() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let program = kerfd.program("long.ngc", "G1 X150 F3000\nM2\n");
+    subscribe(&mut c, 200.0);
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    let mut seen = statuses_until(&mut c, |s| axis(s, "x") > 30.0);
+    c.request(&Command::Pause).unwrap();
+    seen.extend(statuses_until(&mut c, |s| {
+        s.execution == Some(Execution::Paused) && s.velocity == 0.0
+    }));
+    let paused = seen.last().unwrap().clone();
+    assert_eq!(paused.state, MachineState::Auto);
+    let x_paused = axis(&paused, "x");
+    assert!(
+        x_paused > 30.0 && x_paused < 150.0,
+        "stopped on the path: {x_paused}"
+    );
+    // While paused nothing moves: the next 20 statuses (0.1 s) are identical.
+    for _ in 0..20 {
+        let s = next_status(&mut c);
+        assert_eq!(s.position, paused.position);
+        assert_eq!(s.commanded, paused.commanded);
+    }
+    c.request(&Command::Resume).unwrap();
+    seen.extend(statuses_until(&mut c, |s| job_ended(s, id)));
+    let end = seen.last().unwrap();
+    assert_eq!(end.program.as_ref().unwrap().state, ProgramState::Finished);
+    assert!((axis(end, "x") - 150.0).abs() < 1e-9);
+    // Continuity: X never goes back, Y and Z never leave the path.
+    for w in seen.windows(2) {
+        assert!(
+            axis(&w[1], "x") >= axis(&w[0], "x"),
+            "x went back from {} to {}",
+            axis(&w[0], "x"),
+            axis(&w[1], "x")
+        );
+        assert_eq!((axis(&w[1], "y"), axis(&w[1], "z")), (0.0, 0.0));
+    }
+    // And motion resumed from where it paused: the first sample after the
+    // pause that moved starts from x_paused.
+    let resumed = seen
+        .iter()
+        .skip_while(|s| s.execution != Some(Execution::Paused))
+        .find(|s| axis(s, "x") > x_paused)
+        .unwrap();
+    assert!(axis(resumed, "x") > x_paused);
+}
+
+#[test]
+fn abort_stops_on_the_path_and_the_machine_takes_new_work() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let program = kerfd.program("long.ngc", "G1 X150 Y75 F3000\nG1 X0\nM2\n");
+    subscribe(&mut c, 200.0);
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    statuses_until(&mut c, |s| axis(s, "x") > 20.0);
+    assert_eq!(c.request(&Command::Abort).unwrap()["aborted"], id);
+    let end = statuses_until(&mut c, |s| job_ended(s, id)).pop().unwrap();
+    assert_eq!(end.state, MachineState::Idle);
+    assert_eq!(end.job.as_ref().unwrap().state, ProgramState::Aborted);
+    assert_eq!(end.program.as_ref().unwrap().state, ProgramState::Aborted);
+    let (x, y) = (axis(&end, "x"), axis(&end, "y"));
+    // Stopped on the programmed line y = x / 2, short of its end.
+    assert!(x > 20.0 && x < 150.0, "{x}");
+    assert!((y - x / 2.0).abs() < 1e-9, "left the path: ({x}, {y})");
+    assert_eq!(end.velocity, 0.0);
+    assert_eq!(next_status(&mut c).position, end.position, "at rest");
+    c.request(&Command::Unsubscribe).unwrap();
+
+    // The queue was flushed: an MDI move goes exactly where it says.
+    let id = c
+        .request(&Command::Mdi {
+            line: "G0 X5 Y6".into(),
+        })
+        .unwrap()["mdi"]
+        .as_u64()
+        .unwrap() as u32;
+    let end = c.wait_job(id, 100.0, |_| {}).unwrap();
+    assert_eq!((axis(&end, "x"), axis(&end, "y")), (5.0, 6.0));
+    assert_eq!(end.job.unwrap().state, ProgramState::Finished);
+}
+
+#[test]
+fn mdi_moves_reports_errors_and_shows_operator_messages() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let mut watcher = kerfd.client();
+    subscribe(&mut watcher, 1.0);
+    let mdi = |c: &mut Client, line: &str| {
+        let id = c
+            .request(&Command::Mdi { line: line.into() })
+            .map(|r| r["mdi"].as_u64().unwrap() as u32)?;
+        Ok::<Status, ClientError>(c.wait_job(id, 100.0, |_| {}).unwrap())
+    };
+    let end = mdi(&mut c, "G0 X10 Y5 Z-2").unwrap();
+    assert_eq!(
+        (axis(&end, "x"), axis(&end, "y"), axis(&end, "z")),
+        (10.0, 5.0, -2.0)
+    );
+    let (code, msg) = code_of(mdi(&mut c, "G1 X20").unwrap_err());
+    assert_eq!(code, ErrorCode::ProgramError);
+    assert!(msg.starts_with("MDI:1:1: G1"), "{msg}");
+    let (code, msg) = code_of(mdi(&mut c, "G0 Z5").unwrap_err());
+    assert_eq!(code, ErrorCode::ProgramError);
+    assert!(msg.contains("axis Z"), "{msg}");
+    assert_eq!(axis(&status(&mut c), "z"), -2.0, "nothing moved");
+
+    mdi(&mut c, "(MSG, change to the 6 mm cutter) G1 X12 F600").unwrap();
+    let text = loop {
+        if let Event::Message { text, line } = watcher.next_event().unwrap() {
+            assert_eq!(line, 1);
+            break text;
+        }
+    };
+    assert_eq!(text, "change to the 6 mm cutter");
+}
+
+#[test]
+fn jogs_move_by_increments_and_continuously_until_stopped() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let jog = |axis: Option<&str>, joint: Option<JointRef>, dir: i32, distance: Option<f64>| {
+        Command::Jog {
+            axis: axis.map(str::to_string),
+            joint,
+            direction: dir,
+            speed: 3000.0,
+            distance,
+        }
+    };
+    let wait = |c: &mut Client, reply: serde_json::Value| {
+        let id = reply["jog"].as_u64().unwrap() as u32;
+        c.wait_job(id, 100.0, |_| {}).unwrap()
+    };
+    let r = c.request(&jog(Some("x"), None, 1, Some(2.5))).unwrap();
+    let end = wait(&mut c, r);
+    assert_eq!(axis(&end, "x"), 2.5);
+    let r = c
+        .request(&jog(None, Some(JointRef::Name("z".into())), -1, Some(1.0)))
+        .unwrap();
+    assert_eq!(axis(&wait(&mut c, r), "z"), -1.0);
+    let (code, msg) = code_of(
+        c.request(&jog(Some("x"), None, -1, Some(10.0)))
+            .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(msg.contains("axis X") && msg.contains("travel"), "{msg}");
+    let (code, _) = code_of(c.request(&jog(Some("q"), None, 1, None)).unwrap_err());
+    assert_eq!(code, ErrorCode::InvalidArgument);
+
+    // Continuous: runs until jog_stop, then decelerates to rest.
+    subscribe(&mut c, 200.0);
+    let id = c.request(&jog(Some("y"), None, 1, None)).unwrap()["jog"]
+        .as_u64()
+        .unwrap() as u32;
+    let moving = statuses_until(&mut c, |s| axis(s, "y") > 10.0)
+        .pop()
+        .unwrap();
+    assert_eq!(moving.state, MachineState::Manual);
+    c.request(&Command::JogStop).unwrap();
+    let end = statuses_until(&mut c, |s| job_ended(s, id)).pop().unwrap();
+    let y = axis(&end, "y");
+    assert!(y > 10.0 && y < 200.0, "{y}");
+    assert_eq!(end.state, MachineState::Idle);
+    assert_eq!(next_status(&mut c).position, end.position);
+
+    // A continuous jog stops when the client that started it disconnects.
+    let mut jogger = kerfd.client();
+    let id = jogger.request(&jog(Some("x"), None, 1, None)).unwrap()["jog"]
+        .as_u64()
+        .unwrap() as u32;
+    statuses_until(&mut c, |s| axis(s, "x") > 5.0);
+    drop(jogger);
+    let end = statuses_until(&mut c, |s| job_ended(s, id)).pop().unwrap();
+    assert_eq!(end.job.as_ref().unwrap().state, ProgramState::Aborted);
+    assert!(axis(&end, "x") < 300.0);
+}
+
+#[test]
+fn overrides_scale_the_feed_and_the_rapids() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let set = |c: &mut Client, feed: Option<f64>, rapid: Option<f64>| {
+        c.request(&Command::Override { feed, rapid }).unwrap();
+    };
+    // Out of range on purpose, so not through the schema-checking client.
+    let mut raw = Client::connect(&kerfd.socket).unwrap();
+    assert_eq!(
+        code_of(
+            raw.request(&Command::Override {
+                feed: Some(250.0),
+                rapid: None
+            })
+            .unwrap_err()
+        )
+        .0,
+        ErrorCode::InvalidArgument
+    );
+    set(&mut c, Some(50.0), Some(50.0));
+    subscribe(&mut c, 200.0);
+    // 6000 mm/min programmed; 100 mm of travel, ample to cruise.
+    let program = kerfd.program("feeds.ngc", "G1 X100 F6000\nG0 X0\nM2\n");
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    let seen = statuses_until(&mut c, |s| axis(s, "x") > 60.0);
+    let top = seen.iter().map(|s| s.velocity).fold(0.0, f64::max);
+    assert_eq!(seen.last().unwrap().overrides.feed, 50.0);
+    // The executor cruises just under its cap (by J·dt²/8, 0.6 mm/min here):
+    // the top speed is the override times the feed within 1 mm/min.
+    assert!(top <= 3000.0 + 1e-6 && top > 2999.0, "top feed {top}");
+    set(&mut c, Some(120.0), None);
+    let seen = statuses_until(&mut c, |s| axis(s, "x") >= 99.9);
+    let top = seen.iter().map(|s| s.velocity).fold(0.0, f64::max);
+    assert!(top <= 7200.0 + 1e-6 && top > 7199.0, "top feed {top}");
+    // The rapid back: mill3's X allows 150 mm/s = 9000 mm/min; at 50 % the
+    // cap is 4500.
+    let seen = statuses_until(&mut c, |s| job_ended(s, id));
+    let top = seen.iter().map(|s| s.velocity).fold(0.0, f64::max);
+    assert!(top <= 4500.0 + 1e-6 && top > 4499.0, "top rapid {top}");
+}
+
+#[test]
+fn run_from_a_line_and_single_block_stepping() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let program = kerfd.program("steps.ngc", "G21 G90 F3000\nG1 X10\nG1 Y10\nG1 X0\nM2\n");
+    // From line 3: the modes of lines 1–2 hold (X is 10), the machine goes
+    // straight to line 3's end point, then on.
+    let reply = c
+        .request(&Command::Run {
+            path: Some(program.display().to_string()),
+            line: Some(3),
+        })
+        .unwrap();
+    let end = c
+        .wait_job(reply["program"].as_u64().unwrap() as u32, 100.0, |_| {})
+        .unwrap();
+    assert_eq!((axis(&end, "x"), axis(&end, "y")), (0.0, 10.0));
+    let p = end.program.unwrap();
+    assert_eq!((p.start_line, p.state), (3, ProgramState::Finished));
+    let (code, msg) = code_of(
+        c.request(&Command::Run {
+            path: Some(program.display().to_string()),
+            line: Some(9),
+        })
+        .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(msg.contains("ends on line 5"), "{msg}");
+
+    c.request(&Command::Mdi {
+        line: "G0 X0 Y0".into(),
+    })
+    .unwrap();
+    subscribe(&mut c, 200.0);
+    statuses_until(&mut c, |s| {
+        s.state == MachineState::Idle && axis(s, "y") == 0.0
+    });
+    c.request(&Command::Open {
+        path: program.display().to_string(),
+    })
+    .unwrap();
+    // Step from idle: line 2 runs, then the machine waits.
+    c.request(&Command::Step).unwrap();
+    let at = |s: &Status, x: f64, y: f64| {
+        (axis(s, "x") - x).abs() < 1e-9 && (axis(s, "y") - y).abs() < 1e-9 && s.velocity == 0.0
+    };
+    let s = statuses_until(&mut c, |s| at(s, 10.0, 0.0)).pop().unwrap();
+    assert_eq!(
+        (s.state, s.execution),
+        (MachineState::Auto, Some(Execution::Stepping))
+    );
+    for _ in 0..10 {
+        assert_eq!(
+            axis(&next_status(&mut c), "y"),
+            0.0,
+            "waits for the next step"
+        );
+    }
+    c.request(&Command::Step).unwrap();
+    statuses_until(&mut c, |s| at(s, 10.0, 10.0));
+    c.request(&Command::Resume).unwrap();
+    let end = statuses_until(&mut c, |s| s.state == MachineState::Idle)
+        .pop()
+        .unwrap();
+    assert_eq!((axis(&end, "x"), axis(&end, "y")), (0.0, 10.0));
+}
+
+/// mill3 with a following-error limit on joint x and a simulated jam of
+/// that joint at 20 mm.
+fn jamming_machine(kerfd_dir: &std::path::Path) -> std::path::PathBuf {
+    let mill3 = kerf_machines::EMBEDDED[0].1;
+    let text = mill3.replacen(
+        "name = \"x\"\naxis = \"x\"",
+        "name = \"x\"\naxis = \"x\"\nfollowing_error = 0.5",
+        1,
+    ) + "\n[hal.sim.jam]\njoint = 0\nat = 20.0\n";
+    assert!(text.contains("following_error"));
+    let path = kerfd_dir.join("jamming.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_following_error_faults_the_machine_and_every_client_hears_why() {
+    let dir = std::sync::Arc::new(tempfile::tempdir().unwrap());
+    let machine = jamming_machine(dir.path());
+    let kerfd = Kerfd::start_in(dir, &["--machine", machine.to_str().unwrap()], &[]);
+    let mut c = kerfd.ready_client();
+    let mut watchers: Vec<Client> = (0..3).map(|_| kerfd.client()).collect();
+    for (i, w) in watchers.iter_mut().enumerate() {
+        // Different kinds of subscription all carry the machine events.
+        w.request(&Command::Subscribe {
+            rate_hz: [None, Some(5.0), Some(50.0)][i],
+            fields: [Fields::Full, Fields::Changed, Fields::Full][i],
+            events: true,
+        })
+        .unwrap();
+    }
+    let program = kerfd.program("crash.ngc", "G1 X50 F1200\nM2\n");
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    for w in &mut watchers {
+        let reason = loop {
+            if let Event::State {
+                state: MachineState::Fault,
+                previous,
+                reason,
+                ..
+            } = w.next_event().unwrap()
+            {
+                assert_eq!(previous, MachineState::Auto);
+                break reason.unwrap();
+            }
+        };
+        assert!(
+            reason.starts_with("following error: joint x is ") && reason.contains("limit 0.5"),
+            "{reason}"
+        );
+    }
+    let s = status(&mut c);
+    assert_eq!(s.state, MachineState::Fault);
+    assert!(s.fault.as_deref().unwrap().contains("following error"));
+    // The jammed joint stopped at 20 mm.
+    assert_eq!(s.joints[0], 20.0);
+    let (code, msg) = code_of(
+        c.request(&Command::Mdi {
+            line: "G0 Y1".into(),
+        })
+        .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::Fault);
+    assert!(msg.contains("`reset`"), "{msg}");
+    // The program ends failed once its queue is discarded.
+    let end = c.wait_job(id, 100.0, |_| {}).unwrap();
+    let p = end.program.unwrap();
+    assert_eq!(p.state, ProgramState::Failed);
+    assert!(p
+        .error
+        .unwrap()
+        .starts_with("stopped by fault: following error"));
+    // Only the operator clears it; then the machine is off until `on`.
+    c.request(&Command::Reset).unwrap();
+    assert_eq!(status(&mut c).state, MachineState::EstopReset);
+    c.request(&Command::On).unwrap();
+    let id = c
+        .request(&Command::Mdi {
+            line: "G0 Y10".into(),
+        })
+        .unwrap()["mdi"]
+        .as_u64()
+        .unwrap() as u32;
+    let end = c.wait_job(id, 100.0, |_| {}).unwrap();
+    assert_eq!(end.state, MachineState::Idle);
+    assert_eq!(axis(&end, "y"), 10.0);
+}
