@@ -7,6 +7,7 @@
 //!
 //! [servo]
 //! period_us = 1000               # 250 to 10000
+//! priority = 80                  # SCHED_FIFO priority; 0: none
 //!
 //! [socket]
 //! path = "/run/kerf/kerfd.sock"
@@ -59,6 +60,9 @@ pub struct Config {
 pub struct ServoConfig {
     /// Servo period, µs.
     pub period_us: Option<u32>,
+    /// `SCHED_FIFO` priority of the servo thread, 1 to 99 (default 80);
+    /// 0 runs it at normal priority.
+    pub priority: Option<u8>,
 }
 
 /// `[socket]`: the Unix command socket.
@@ -138,6 +142,12 @@ impl Config {
             return Err(err(
                 "servo.period_us",
                 format!("{p} µs is out of range 250 to 10000"),
+            ));
+        }
+        if let Some(p) = config.servo.priority.filter(|p| *p > 99) {
+            return Err(err(
+                "servo.priority",
+                format!("{p} is out of range: 1 to 99, or 0 for no real-time priority"),
             ));
         }
         if let Some(g) = config.socket.group.as_deref().filter(|g| g.is_empty()) {

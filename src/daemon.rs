@@ -48,6 +48,9 @@ pub struct Options {
     pub machine: String,
     /// Servo period, µs (250 to 10000).
     pub period_us: u32,
+    /// `SCHED_FIFO` priority of the servo thread, 1 to 99; 0 leaves it at
+    /// normal priority.
+    pub priority: u8,
     /// Where the parameter file and tool table live.
     pub state_dir: PathBuf,
     /// Bearer token TCP clients must present with `auth` (none: TCP needs
@@ -152,7 +155,8 @@ impl Daemon {
             .collect();
         tick.set_following_error_limits(&limits);
         let (writer, reader) = seqlock(*tick.snapshot());
-        let servo = ServoThread::spawn(tick, writer).context("cannot start the servo thread")?;
+        let servo = ServoThread::spawn(tick, writer, options.priority)
+            .context("cannot start the servo thread")?;
         tracing::info!(machine = %description.name, %origin, period_us = options.period_us,
             state_dir = %options.state_dir.display(), "servo running");
         let joint_names = kinematics.joints().iter().map(|j| j.name.clone()).collect();

@@ -425,9 +425,14 @@ impl ServoThread {
     /// Start ticking `tick` every period on the wall clock (CLOCK_MONOTONIC,
     /// absolute deadlines, so sleep jitter does not accumulate), publishing
     /// each snapshot to `status`.
+    ///
+    /// With `priority` 1 to 99 the thread asks for `SCHED_FIFO` at that
+    /// priority first; where the OS refuses (no `CAP_SYS_NICE`, no
+    /// `LimitRTPRIO`), it says so in the log and runs at normal priority.
     pub fn spawn(
         mut tick: ServoTick,
         mut status: Writer<Snapshot>,
+        priority: u8,
     ) -> std::io::Result<ServoThread> {
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = stop.clone();
@@ -435,6 +440,15 @@ impl ServoThread {
         let handle = std::thread::Builder::new()
             .name("kerf-servo".into())
             .spawn(move || {
+                if priority > 0 {
+                    match make_realtime(priority) {
+                        Ok(()) => tracing::info!(priority, "servo thread runs SCHED_FIFO"),
+                        Err(e) => tracing::warn!(
+                            "servo thread runs without real-time priority ({e}): expect late \
+                             ticks under load; see docs/deploy.md"
+                        ),
+                    }
+                }
                 let period_ns = period.as_nanos() as i64;
                 let mut deadline = now_ns();
                 let mut overruns = 0;
@@ -483,6 +497,20 @@ impl ServoThread {
 impl Drop for ServoThread {
     fn drop(&mut self) {
         self.stop();
+    }
+}
+
+/// Switch the calling thread to `SCHED_FIFO` at `priority`.
+fn make_realtime(priority: u8) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: i32::from(priority),
+    };
+    // SAFETY: valid pointer to a sched_param for the calling thread.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::from_raw_os_error(rc))
     }
 }
 

@@ -67,6 +67,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             .or(config.machine.clone())
             .unwrap_or_else(|| kerf_machines::DEFAULT_MACHINE.into()),
         period_us: args.period_us.or(config.servo.period_us).unwrap_or(1000),
+        priority: config.servo.priority.unwrap_or(80),
         state_dir: args
             .state_dir
             .or(config.state_dir.clone())
@@ -74,6 +75,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         tcp_token: tcp.as_ref().and_then(|t| t.token.clone()),
     };
     tracing::info!(config = %config_name, "starting");
+    lock_memory();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -93,8 +95,9 @@ fn run(args: Args) -> anyhow::Result<()> {
                 )?),
                 None => None,
             };
-        if let Some(t) = &tcp {
-            tracing::info!(address = %t.listen, token = t.token.is_some(), "listening on TCP");
+        if let (Some(t), Some(l)) = (&tcp, &tcp_listener) {
+            let address = l.local_addr().unwrap_or(t.listen);
+            tracing::info!(%address, token = t.token.is_some(), "listening on TCP");
         }
         tracing::info!(socket = %socket.display(), "listening");
         let status = daemon.status();
@@ -117,6 +120,18 @@ fn run(args: Args) -> anyhow::Result<()> {
     let _ = std::fs::remove_file(&socket);
     tracing::info!("stopped");
     result
+}
+
+/// Keep every page of the process in RAM, so the servo thread never waits
+/// for a page fault; a refusal (RLIMIT_MEMLOCK) is logged, not fatal.
+fn lock_memory() {
+    use nix::sys::mman::{mlockall, MlockAllFlags};
+    match mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE) {
+        Ok(()) => tracing::info!("memory locked"),
+        Err(e) => tracing::warn!(
+            "cannot lock memory ({e}): page faults may delay the servo; raise LimitMEMLOCK"
+        ),
+    }
 }
 
 /// A function reading the servo's tick count, for the watchdog.

@@ -19,6 +19,8 @@ pub struct Kerfd {
     pub child: Child,
     pub socket: PathBuf,
     pub dir: Arc<tempfile::TempDir>,
+    /// kerfd's log up to and including its `listening` line.
+    pub startup_log: String,
     /// kerfd's log lines after `listening`, as they come.
     pub log: std::sync::mpsc::Receiver<String>,
 }
@@ -80,6 +82,7 @@ impl Kerfd {
             child,
             socket,
             dir,
+            startup_log: seen,
             log: rx,
         }
     }
