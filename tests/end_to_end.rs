@@ -735,3 +735,217 @@ fn a_following_error_faults_the_machine_and_every_client_hears_why() {
     assert_eq!(end.state, MachineState::Idle);
     assert_eq!(axis(&end, "y"), 10.0);
 }
+
+#[test]
+fn every_command_and_event_matches_the_schema() {
+    // Every line of this test goes through the schema-checking client;
+    // at the end, each command's result and each event kind must have been
+    // checked at least once.
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.client();
+    let mut w = kerfd.client();
+    w.request(&Command::Subscribe {
+        rate_hz: Some(50.0),
+        fields: Fields::Changed,
+        events: true,
+    })
+    .unwrap();
+    c.request(&Command::Hello).unwrap();
+    c.request(&Command::Auth {
+        token: "any".into(),
+    })
+    .unwrap();
+    c.request(&Command::Estop).unwrap();
+    support::ready(&mut c);
+    c.request(&Command::Off).unwrap();
+    c.request(&Command::On).unwrap();
+    let set = |m: serde_json::Value| m.as_object().unwrap().clone();
+    c.request(&Command::SetOffset {
+        system: "g59.3".into(),
+        values: set(serde_json::json!({"x": 1.5, "Z": -2})),
+    })
+    .unwrap();
+    c.request(&Command::Offsets).unwrap();
+    c.request(&Command::SetTool {
+        tool: 4,
+        pocket: Some(7),
+        offsets: Some(set(serde_json::json!({"z": 33.0}))),
+        diameter: Some(6.0),
+        comment: Some("6 mm end mill".into()),
+    })
+    .unwrap();
+    c.request(&Command::Tools).unwrap();
+    c.request(&Command::RemoveTool { tool: 4 }).unwrap();
+    c.request(&Command::Override {
+        feed: Some(100.0),
+        rapid: None,
+    })
+    .unwrap();
+    let id = c
+        .request(&Command::Jog {
+            axis: Some("x".into()),
+            joint: None,
+            direction: 1,
+            speed: 600.0,
+            distance: None,
+        })
+        .unwrap()["jog"]
+        .as_u64()
+        .unwrap() as u32;
+    c.request(&Command::JogStop).unwrap();
+    c.wait_job(id, 100.0, |_| {}).unwrap();
+    let program = kerfd.program(
+        "all.ngc",
+        "G21 G90\n(MSG, starting)\nG1 X40 F1200\nG1 Y10\nM2\n",
+    );
+    c.request(&Command::Open {
+        path: program.display().to_string(),
+    })
+    .unwrap();
+    let id = c
+        .request(&Command::Run {
+            path: None,
+            line: None,
+        })
+        .unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    c.request(&Command::Pause).unwrap();
+    c.request(&Command::Step).unwrap();
+    c.request(&Command::Resume).unwrap();
+    c.request(&Command::Abort).unwrap();
+    c.wait_job(id, 100.0, |_| {}).unwrap();
+    let id = c.request(&Command::Step).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    c.request(&Command::Abort).unwrap();
+    c.wait_job(id, 100.0, |_| {}).unwrap();
+    let id = c
+        .request(&Command::Mdi {
+            line: "G0 X1".into(),
+        })
+        .unwrap()["mdi"]
+        .as_u64()
+        .unwrap() as u32;
+    c.wait_job(id, 100.0, |_| {}).unwrap();
+    let mut events = std::collections::BTreeSet::new();
+    while !["state", "program", "message", "changes"]
+        .iter()
+        .all(|e| events.contains(*e))
+    {
+        let e = serde_json::to_value(w.next_event().unwrap()).unwrap();
+        events.insert(e["event"].as_str().unwrap().to_string());
+    }
+    w.request(&Command::Unsubscribe).unwrap();
+    c.request(&Command::Status).unwrap();
+
+    let seen = support::schema().seen.lock().unwrap().clone();
+    for cmd in kerf::protocol::COMMANDS {
+        assert!(
+            seen.contains(&format!("result_{cmd}")),
+            "no `{cmd}` reply was checked against the schema"
+        );
+    }
+    for e in ["state", "program", "message", "changes", "status"] {
+        assert!(
+            seen.contains(&format!("event_{e}")),
+            "no `{e}` event checked"
+        );
+    }
+}
+
+#[test]
+fn the_cli_drives_the_machine_and_prints_for_people_and_scripts() {
+    let kerfd = Kerfd::start(&[]);
+    let socket = kerfd.socket.to_str().unwrap().to_string();
+    let kerf = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_kerf"))
+            .args(["--socket", &socket])
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).to_string(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+        )
+    };
+    // `watch` on a pipe prints one line per change; start it first so it
+    // sees the machine come up.
+    let mut watch = std::process::Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args(["--socket", &socket, "watch", "--rate", "50"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut watched = BufReader::new(watch.stdout.take().unwrap());
+    let mut first = String::new();
+    watched.read_line(&mut first).unwrap();
+    assert!(first.starts_with("estop  line 0"), "{first}");
+
+    for cmd in ["reset", "on", "home"] {
+        let (code, _, err) = kerf(&[cmd]);
+        assert_eq!(code, Some(0), "{cmd}: {err}");
+    }
+    let (code, out, err) = kerf(&["mdi", "G0 X10 Y5"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.starts_with("idle  X   10.0000  Y    5.0000"), "{out}");
+    let (code, out, _) = kerf(&["jog", "y", "-", "--distance", "2", "--speed", "1200"]);
+    assert_eq!(code, Some(0));
+    assert!(out.contains("Y    3.0000"), "{out}");
+    let (code, _, err) = kerf(&["mdi", "G0 Z5"]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("axis Z"), "{err}");
+    let (code, out, _) = kerf(&["override", "feed", "120"]);
+    assert_eq!((code, out.trim()), (Some(0), "feed override 120 %"));
+    let (code, out, _) = kerf(&["--json", "status"]);
+    assert_eq!(code, Some(0));
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    support::schema().check("status", &v);
+    assert_eq!(v["overrides"]["feed"], 120.0);
+    assert_eq!(v["position"]["y"], 3.0);
+
+    let (code, _, _) = kerf(&["offsets", "set", "G55", "x=1.25", "z=-3"]);
+    assert_eq!(code, Some(0));
+    let (_, out, _) = kerf(&["offsets"]);
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with(" G55    X    1.2500  Y    0.0000  Z   -3.0000")),
+        "{out}"
+    );
+    let (code, _, err) = kerf(&["offsets", "set", "G60", "x=1"]);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("G54 … G59.3"), "{err}");
+    let (code, _, _) = kerf(&[
+        "tools",
+        "set",
+        "3",
+        "z=42.5",
+        "--diameter",
+        "3",
+        "--comment",
+        "drill",
+    ]);
+    assert_eq!(code, Some(0));
+    let (_, out, _) = kerf(&["--json", "tools"]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["tools"][0]["offsets"]["z"], 42.5);
+    assert_eq!(v["tools"][0]["comment"], "drill");
+    let (_, out, _) = kerf(&["tools"]);
+    assert!(
+        out.starts_with("T3    P3    X    0.0000  Y    0.0000  Z   42.5000  D3.0000  drill"),
+        "{out}"
+    );
+
+    let (code, out, _) = kerf(&["estop"]);
+    assert_eq!((code, out.trim()), (Some(0), "e-stop"));
+    // The watcher followed along and saw the e-stop.
+    let mut line = String::new();
+    while !line.starts_with("state estop") {
+        line.clear();
+        watched.read_line(&mut line).unwrap();
+    }
+    assert!(line.contains("e-stop"), "{line}");
+    watch.kill().unwrap();
+    watch.wait().unwrap();
+}

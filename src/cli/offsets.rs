@@ -111,8 +111,8 @@ pub fn tools(
     for t in tools {
         println!(
             "T{:<4} P{:<4} {}  D{:.4}  {}",
-            t["tool"],
-            t["pocket"],
+            t["tool"].as_u64().unwrap_or(0),
+            t["pocket"].as_u64().unwrap_or(0),
             axes_line(&t["offsets"]),
             t["diameter"].as_f64().unwrap_or(0.0),
             t["comment"].as_str().unwrap_or("")
