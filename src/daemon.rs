@@ -611,16 +611,13 @@ async fn serve_client<S: AsyncRead + AsyncWrite + Send + 'static>(
     }
     conn.unsubscribe();
     // A continuous jog is a dead man's switch: it stops with its client.
-    let orphan = shared.observe().orphaned_jog(conn.id);
+    let orphan = shared.observe().stop_orphaned_jog(conn.id);
     if let Some(tag) = orphan {
         tracing::info!(
             client = conn.id,
             "jogging client disconnected: stopping the jog"
         );
-        let mut control = shared.observe();
-        if control.abort(true).is_ok() {
-            let _ = shared.send(ServoCommand::Abort { program: tag });
-        }
+        let _ = shared.send(ServoCommand::Abort { program: tag });
     }
     drop(conn);
     let _ = writer.await;

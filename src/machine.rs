@@ -469,15 +469,23 @@ impl Control {
         Ok(tag)
     }
 
-    /// A continuous jog owned by `client`, which has gone: its tag.
-    pub fn orphaned_jog(&self, client: u64) -> Option<u32> {
-        self.job.as_ref().and_then(|j| match j.kind {
-            JobKind::Jog {
-                client: c,
-                continuous: true,
-            } if c == client => Some(j.tag),
-            _ => None,
-        })
+    /// `client` has disconnected: if it was running a continuous jog, stop
+    /// it (a jog key is a dead man's switch) and return the tag to abort.
+    pub fn stop_orphaned_jog(&mut self, client: u64) -> Option<u32> {
+        let job = self.job.as_ref()?;
+        let JobKind::Jog {
+            client: owner,
+            continuous: true,
+        } = job.kind
+        else {
+            return None;
+        };
+        if owner != client {
+            return None;
+        }
+        job.cancel.store(true, Ordering::Relaxed);
+        self.reason = Some("jog stopped: the client that started it disconnected".into());
+        Some(job.tag)
     }
 
     fn cancel_job(&mut self) {
@@ -542,7 +550,6 @@ impl Control {
     fn end_job(&mut self, job: Job, reached_end: bool) {
         self.held = false;
         self.single_block = false;
-        // Messages of an aborted job that were not reached are dropped.
         let (state, error) = if let Some(f) = &self.fault {
             (ProgramState::Failed, Some(format!("stopped by fault: {f}")))
         } else if let Some(e) = job.error {
@@ -555,7 +562,8 @@ impl Control {
                 Some("stopped by e-stop or drives off".into()),
             )
         } else {
-            (ProgramState::Aborted, Some("aborted".into()))
+            let why = self.reason.clone().unwrap_or_else(|| "aborted".into());
+            (ProgramState::Aborted, Some(why))
         };
         if let (JobKind::Home { joints }, ProgramState::Finished) = (&job.kind, state) {
             for &j in joints {

@@ -2,10 +2,15 @@
 
 use std::path::PathBuf;
 
+/// The socket of the system service (`deploy/kerfd.service`:
+/// `RuntimeDirectory=kerf`).
+pub const SYSTEM_SOCKET: &str = "/run/kerf/kerfd.sock";
+
 /// The command socket path used when `--socket` is not given.
 ///
 /// In order: `$KERF_SOCKET`; `$RUNTIME_DIRECTORY/kerfd.sock` (set by systemd's
-/// `RuntimeDirectory=`); `$XDG_RUNTIME_DIR/kerf/kerfd.sock`;
+/// `RuntimeDirectory=`); [`SYSTEM_SOCKET`] when that socket exists (the
+/// system service is running); `$XDG_RUNTIME_DIR/kerf/kerfd.sock`;
 /// `/tmp/kerf-$UID/kerfd.sock`.
 pub fn default_socket() -> PathBuf {
     if let Some(p) = std::env::var_os("KERF_SOCKET").filter(|p| !p.is_empty()) {
@@ -13,6 +18,9 @@ pub fn default_socket() -> PathBuf {
     }
     if let Some(dir) = systemd_directory("RUNTIME_DIRECTORY") {
         return dir.join("kerfd.sock");
+    }
+    if std::path::Path::new(SYSTEM_SOCKET).exists() {
+        return PathBuf::from(SYSTEM_SOCKET);
     }
     if let Some(dir) = std::env::var_os("XDG_RUNTIME_DIR").filter(|p| !p.is_empty()) {
         return PathBuf::from(dir).join("kerf").join("kerfd.sock");

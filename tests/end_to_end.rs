@@ -531,7 +531,12 @@ fn jogs_move_by_increments_and_continuously_until_stopped() {
     statuses_until(&mut c, |s| axis(s, "x") > 5.0);
     drop(jogger);
     let end = statuses_until(&mut c, |s| job_ended(s, id)).pop().unwrap();
-    assert_eq!(end.job.as_ref().unwrap().state, ProgramState::Aborted);
+    let job = end.job.as_ref().unwrap();
+    assert_eq!(job.state, ProgramState::Aborted);
+    assert_eq!(
+        job.error.as_deref(),
+        Some("jog stopped: the client that started it disconnected")
+    );
     assert!(axis(&end, "x") < 300.0);
 }
 
