@@ -19,6 +19,7 @@
 //! ```
 //!
 //! Every key is optional; unknown keys are errors (they are usually typos).
+//! Relative paths are taken from the configuration file's directory.
 //! Every error names the file, the key and the reason.
 
 use std::net::SocketAddr;
@@ -103,10 +104,24 @@ impl Config {
             reason: format!("cannot read: {e}"),
         })?;
         let mut config = Config::parse(&text, &file)?;
-        // Relative machine paths are relative to the configuration file.
-        if let (Some(m), Some(dir)) = (config.machine.as_mut(), path.parent()) {
-            if (m.contains('/') || m.ends_with(".toml")) && Path::new(m).is_relative() {
-                *m = dir.join(&*m).display().to_string();
+        // Relative paths are relative to the configuration file.
+        if let Some(dir) = path.parent() {
+            if let Some(m) = config.machine.as_mut() {
+                if (m.contains('/') || m.ends_with(".toml")) && Path::new(m).is_relative() {
+                    *m = dir.join(&*m).display().to_string();
+                }
+            }
+            for p in [
+                config.state_dir.as_mut(),
+                config.socket.path.as_mut(),
+                config.tcp.as_mut().and_then(|t| t.token_file.as_mut()),
+            ]
+            .into_iter()
+            .flatten()
+            {
+                if p.is_relative() {
+                    *p = dir.join(&*p);
+                }
             }
         }
         Ok(config)
@@ -269,12 +284,18 @@ mod tests {
     fn relative_machine_paths_follow_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("kerf.toml");
-        std::fs::write(&path, "machine = \"machines/m.toml\"\n").unwrap();
+        std::fs::write(
+            &path,
+            "machine = \"machines/m.toml\"\nstate_dir = \"state\"\n[socket]\npath = \"/run/k.sock\"\n",
+        )
+        .unwrap();
         let c = Config::load(&path).unwrap();
         assert_eq!(
             c.machine.unwrap(),
             dir.path().join("machines/m.toml").display().to_string()
         );
+        assert_eq!(c.state_dir.unwrap(), dir.path().join("state"));
+        assert_eq!(c.socket.path.unwrap(), Path::new("/run/k.sock"));
         let e = Config::load(&dir.path().join("none.toml")).unwrap_err();
         assert!(e.to_string().contains("none.toml: cannot read"), "{e}");
     }
