@@ -198,6 +198,12 @@ impl Daemon {
         self.shared.status.clone()
     }
 
+    /// Machine events as they happen, for watchers outside the socket (the
+    /// systemd status line).
+    pub fn events(&self) -> broadcast::Receiver<Arc<str>> {
+        self.shared.events.subscribe()
+    }
+
     /// Serve clients on the Unix socket `unix` and, when given, on `tcp`,
     /// until `shutdown` completes. Also watches the servo for faults, ended
     /// jobs and messages, and turns them into events.

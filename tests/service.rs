@@ -274,7 +274,17 @@ fn systemd_hears_ready_watchdog_status_and_stopping() {
             pings += 1;
         }
     }
-    assert_eq!(kerfd.client().status().unwrap().state, MachineState::Estop);
+    let mut c = kerfd.client();
+    assert_eq!(c.status().unwrap().state, MachineState::Estop);
+    // State changes update the status line.
+    c.request(&Command::Reset).unwrap();
+    loop {
+        let m = recv();
+        if m.starts_with("STATUS=") {
+            assert_eq!(m, "STATUS=estop_reset: e-stop reset\n");
+            break;
+        }
+    }
     kill(Pid::from_raw(kerfd.child.id() as i32), Signal::SIGTERM).unwrap();
     loop {
         let m = recv();

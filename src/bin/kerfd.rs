@@ -108,8 +108,10 @@ fn run(args: Args) -> anyhow::Result<()> {
             socket.display()
         ));
         let watchdog = tokio::spawn(feed_watchdog(daemon_ticks(&daemon)));
+        let status_line = tokio::spawn(show_state(daemon.events()));
         daemon.serve(unix, tcp_listener, shutdown_signal()).await;
         watchdog.abort();
+        status_line.abort();
         systemd::stopping("stopping: bringing motion to rest");
         tracing::info!("stopping");
         let report = daemon.shutdown(Duration::from_secs(5)).await;
@@ -158,6 +160,28 @@ async fn feed_watchdog(ticks: impl Fn() -> u64) {
             tracing::error!("servo thread stalled: not feeding the watchdog");
         }
         last = now;
+    }
+}
+
+/// Keep systemd's status line (`systemctl status kerfd`) on the machine
+/// state and why it last changed.
+async fn show_state(mut events: tokio::sync::broadcast::Receiver<std::sync::Arc<str>>) {
+    use kerf::protocol::{Event, ServerLine};
+    loop {
+        let line = match events.recv().await {
+            Ok(line) => line,
+            Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => continue,
+            Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
+        };
+        if let Ok(ServerLine::Event(Event::State { state, reason, .. })) =
+            serde_json::from_str::<ServerLine>(&line)
+        {
+            systemd::status(&format!(
+                "{}{}",
+                kerf::machine::state_name(state),
+                reason.map(|r| format!(": {r}")).unwrap_or_default()
+            ));
+        }
     }
 }
 
