@@ -8,6 +8,7 @@
 //! [servo]
 //! period_us = 1000               # 250 to 10000
 //! priority = 80                  # SCHED_FIFO priority; 0: none
+//! cpu = 3                        # pin the servo thread (optional)
 //!
 //! [socket]
 //! path = "/run/kerf/kerfd.sock"
@@ -64,6 +65,8 @@ pub struct ServoConfig {
     /// `SCHED_FIFO` priority of the servo thread, 1 to 99 (default 80);
     /// 0 runs it at normal priority.
     pub priority: Option<u8>,
+    /// CPU (from 0) to pin the servo thread to.
+    pub cpu: Option<usize>,
 }
 
 /// `[socket]`: the Unix command socket.
@@ -165,6 +168,17 @@ impl Config {
                 format!("{p} is out of range: 1 to 99, or 0 for no real-time priority"),
             ));
         }
+        // SAFETY: sysconf has no preconditions.
+        let cpus = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_CONF) }.max(1) as usize;
+        if let Some(c) = config.servo.cpu.filter(|c| *c >= cpus) {
+            return Err(err(
+                "servo.cpu",
+                format!(
+                    "CPU {c} does not exist: this machine has CPUs 0 to {}",
+                    cpus - 1
+                ),
+            ));
+        }
         if let Some(g) = config.socket.group.as_deref().filter(|g| g.is_empty()) {
             return Err(err("socket.group", format!("{g:?}: empty group name")));
         }
@@ -259,6 +273,13 @@ mod tests {
             "{e}"
         );
         assert!(e.reason.contains("line 2"), "{e}");
+
+        let e = Config::parse("[servo]\ncpu = 100000\n", "k.toml").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("k.toml: key `servo.cpu`: CPU 100000 does not exist"),
+            "{e}"
+        );
 
         let e = Config::parse("[servo]\nperiod_us = 20\n", "k.toml").unwrap_err();
         assert_eq!(

@@ -51,6 +51,8 @@ pub struct Options {
     /// `SCHED_FIFO` priority of the servo thread, 1 to 99; 0 leaves it at
     /// normal priority.
     pub priority: u8,
+    /// CPU to pin the servo thread to.
+    pub cpu: Option<usize>,
     /// Where the parameter file and tool table live.
     pub state_dir: PathBuf,
     /// Bearer token TCP clients must present with `auth` (none: TCP needs
@@ -155,7 +157,7 @@ impl Daemon {
             .collect();
         tick.set_following_error_limits(&limits);
         let (writer, reader) = seqlock(*tick.snapshot());
-        let servo = ServoThread::spawn(tick, writer, options.priority)
+        let servo = ServoThread::spawn(tick, writer, options.priority, options.cpu)
             .context("cannot start the servo thread")?;
         tracing::info!(machine = %description.name, %origin, period_us = options.period_us,
             state_dir = %options.state_dir.display(), "servo running");

@@ -429,10 +429,13 @@ impl ServoThread {
     /// With `priority` 1 to 99 the thread asks for `SCHED_FIFO` at that
     /// priority first; where the OS refuses (no `CAP_SYS_NICE`, no
     /// `LimitRTPRIO`), it says so in the log and runs at normal priority.
+    /// With `cpu`, it pins itself to that CPU (e.g. one isolated with
+    /// `isolcpus=`), or says in the log why it could not.
     pub fn spawn(
         mut tick: ServoTick,
         mut status: Writer<Snapshot>,
         priority: u8,
+        cpu: Option<usize>,
     ) -> std::io::Result<ServoThread> {
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = stop.clone();
@@ -447,6 +450,14 @@ impl ServoThread {
                             "servo thread runs without real-time priority ({e}): expect late \
                              ticks under load; see docs/deploy.md"
                         ),
+                    }
+                }
+                // Pinned after going real-time, so the move to the CPU
+                // itself happens at real-time priority.
+                if let Some(cpu) = cpu {
+                    match pin_to_cpu(cpu) {
+                        Ok(()) => tracing::info!(cpu, "servo thread pinned"),
+                        Err(e) => tracing::warn!(cpu, "cannot pin the servo thread: {e}"),
                     }
                 }
                 let period_ns = period.as_nanos() as i64;
@@ -498,6 +509,13 @@ impl Drop for ServoThread {
     fn drop(&mut self) {
         self.stop();
     }
+}
+
+/// Run the calling thread on `cpu` only.
+fn pin_to_cpu(cpu: usize) -> nix::Result<()> {
+    let mut set = nix::sched::CpuSet::new();
+    set.set(cpu)?;
+    nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set)
 }
 
 /// Switch the calling thread to `SCHED_FIFO` at `priority`.

@@ -68,6 +68,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|| kerf_machines::DEFAULT_MACHINE.into()),
         period_us: args.period_us.or(config.servo.period_us).unwrap_or(1000),
         priority: config.servo.priority.unwrap_or(80),
+        cpu: config.servo.cpu,
         state_dir: args
             .state_dir
             .or(config.state_dir.clone())
