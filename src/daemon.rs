@@ -565,9 +565,12 @@ struct Connection {
 }
 
 impl Connection {
-    fn unsubscribe(&mut self) {
+    /// Stop this client's event tasks and wait until they have stopped, so
+    /// no event of the old subscription follows the reply.
+    async fn unsubscribe(&mut self) {
         for task in self.subscription.drain(..) {
             task.abort();
+            let _ = task.await;
         }
     }
 }
@@ -617,7 +620,7 @@ async fn serve_client<S: AsyncRead + AsyncWrite + Send + 'static>(
             break;
         }
     }
-    conn.unsubscribe();
+    conn.unsubscribe().await;
     // A continuous jog is a dead man's switch: it stops with its client.
     let orphan = shared.observe().stop_orphaned_jog(conn.id);
     if let Some(tag) = orphan {
@@ -678,7 +681,7 @@ async fn handle(
                     "rate_hz {r} is out of range: use 1 to 1000"
                 )));
             }
-            conn.unsubscribe();
+            conn.unsubscribe().await;
             if events {
                 conn.subscription
                     .push(spawn_events(shared.events.subscribe(), conn.tx.clone()));
@@ -690,7 +693,7 @@ async fn handle(
             Ok(json!({"rate_hz": rate_hz, "fields": fields, "events": events}))
         }
         Command::Unsubscribe => {
-            conn.unsubscribe();
+            conn.unsubscribe().await;
             Ok(json!({}))
         }
         Command::Estop => {
