@@ -36,8 +36,11 @@ pub const SYSTEM_CONFIG: &str = "/etc/kerf/kerf.toml";
 #[derive(Debug, thiserror::Error)]
 #[error("{file}: {}{reason}", key.as_ref().map(|k| format!("key `{k}`: ")).unwrap_or_default())]
 pub struct ConfigError {
+    /// The configuration file.
     pub file: String,
+    /// The key at fault, dotted (`tcp.listen`), when one is.
     pub key: Option<String>,
+    /// What is wrong.
     pub reason: String,
 }
 
@@ -53,6 +56,7 @@ pub struct Config {
     pub servo: ServoConfig,
     #[serde(default)]
     pub socket: SocketConfig,
+    /// `[tcp]`, when present.
     pub tcp: Option<TcpConfig>,
 }
 
@@ -73,6 +77,7 @@ pub struct ServoConfig {
 #[derive(Clone, Debug, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SocketConfig {
+    /// Socket path.
     pub path: Option<PathBuf>,
     /// Group that owns the socket, so its members may connect.
     pub group: Option<String>,
@@ -93,7 +98,9 @@ pub struct TcpConfig {
 /// The TCP listener with its resolved token.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tcp {
+    /// Address to listen on.
     pub listen: SocketAddr,
+    /// The bearer token, if one is required.
     pub token: Option<String>,
 }
 

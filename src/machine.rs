@@ -59,6 +59,7 @@ pub enum JobKind {
 pub struct Job {
     /// The tag of the `Stop` marker that ends it (also the program id).
     pub tag: u32,
+    /// What it moves for.
     pub kind: JobKind,
     /// Set to make its planner thread stop feeding the servo.
     pub cancel: Arc<AtomicBool>,
@@ -69,7 +70,9 @@ pub struct Job {
 /// The opened (or last run) program.
 #[derive(Clone, Debug)]
 pub struct Program {
+    /// The file, absolute.
     pub path: PathBuf,
+    /// How it stands, as status shows it.
     pub status: ProgramStatus,
 }
 

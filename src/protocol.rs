@@ -330,6 +330,7 @@ pub enum JobType {
 pub struct JobStatus {
     /// The id its command returned.
     pub id: u32,
+    /// What the job moves for.
     pub kind: JobType,
     /// `running`, then `finished`, `failed` or `aborted`.
     pub state: ProgramState,
@@ -340,7 +341,9 @@ pub struct JobStatus {
 /// Override factors in force, percent.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub struct Overrides {
+    /// Feed override, 0 to 200.
     pub feed: f64,
+    /// Rapid override, 0 to 100.
     pub rapid: f64,
 }
 
@@ -363,6 +366,7 @@ pub struct ServoStatus {
 pub struct Status {
     /// Machine name, e.g. `mill3`.
     pub machine: String,
+    /// The machine state (see `docs/protocol.md`).
     pub state: MachineState,
     /// In `auto` and `mdi`: running, paused or stepping.
     pub execution: Option<Execution>,
@@ -379,9 +383,11 @@ pub struct Status {
     pub joints: Vec<f64>,
     /// Path speed, mm/min.
     pub velocity: f64,
+    /// Overrides in force, percent.
     pub overrides: Overrides,
     /// The current or last job.
     pub job: Option<JobStatus>,
+    /// The opened, running or last program.
     pub program: Option<ProgramStatus>,
     /// Why motion stopped, in fault state.
     pub fault: Option<String>,

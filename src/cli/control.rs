@@ -70,6 +70,7 @@ pub fn joint_ref(s: &str) -> JointRef {
 pub struct Jog<'a> {
     /// Axis letter, or joint name/number when `joint`.
     pub target: &'a str,
+    /// `target` names a joint.
     pub joint: bool,
     /// `+` or `-`.
     pub direction: i32,

@@ -64,11 +64,15 @@ pub fn offsets(socket: &Path, set: Option<(&str, &[String])>, json: bool) -> Res
 
 /// What `kerf tools set` changes.
 pub struct ToolChange {
+    /// Tool number.
     pub tool: u32,
+    /// New pocket.
     pub pocket: Option<u32>,
     /// `AXIS=VALUE` offsets, e.g. `z=12.5`.
     pub offsets: Vec<String>,
+    /// New diameter, mm.
     pub diameter: Option<f64>,
+    /// New comment.
     pub comment: Option<String>,
 }
 
