@@ -42,6 +42,12 @@ enum Cmd {
         #[arg(long, value_name = "LINE")]
         from: Option<u32>,
     },
+    /// Check a program and make it the one `step` (and `run` without a
+    /// file, over the socket) runs.
+    Open {
+        /// The program file.
+        file: PathBuf,
+    },
     /// Feed hold: decelerate on the path and wait.
     Pause,
     /// Release feed hold or single-block stepping.
@@ -154,6 +160,15 @@ fn main() -> ExitCode {
         Cmd::Status => cli::status::status(socket, json),
         Cmd::Watch { rate } => cli::watch::watch(socket, rate, json),
         Cmd::Run { file, from } => cli::run::run(socket, &file, from, json),
+        Cmd::Open { file } => match std::fs::canonicalize(&file) {
+            Ok(path) => simple(
+                Command::Open {
+                    path: path.display().to_string(),
+                },
+                "opened",
+            ),
+            Err(e) => Err(Failure::new(format!("{}: {e}", file.display()))),
+        },
         Cmd::Pause => simple(Command::Pause, "paused"),
         Cmd::Resume => simple(Command::Resume, "resumed"),
         Cmd::Step => simple(Command::Step, "stepping"),
