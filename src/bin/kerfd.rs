@@ -126,14 +126,24 @@ fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Keep every page of the process in RAM, so the servo thread never waits
-/// for a page fault; a refusal (RLIMIT_MEMLOCK) is logged, not fatal.
+/// for a page fault. Only where the memory-lock limit is unlimited (or we
+/// are root): with a finite limit, `MCL_FUTURE` would make allocations past
+/// it fail later, which is worse than the page faults.
 fn lock_memory() {
     use nix::sys::mman::{mlockall, MlockAllFlags};
+    use nix::sys::resource::{getrlimit, Resource, RLIM_INFINITY};
+    let unlimited =
+        getrlimit(Resource::RLIMIT_MEMLOCK).is_ok_and(|(soft, _)| soft == RLIM_INFINITY);
+    if !unlimited && !nix::unistd::geteuid().is_root() {
+        tracing::warn!(
+            "not locking memory: the memory-lock limit is finite (LimitMEMLOCK=infinity in the unit, \
+             or `ulimit -l unlimited`); page faults may delay the servo"
+        );
+        return;
+    }
     match mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE) {
         Ok(()) => tracing::info!("memory locked"),
-        Err(e) => tracing::warn!(
-            "cannot lock memory ({e}): page faults may delay the servo; raise LimitMEMLOCK"
-        ),
+        Err(e) => tracing::warn!("cannot lock memory ({e}): page faults may delay the servo"),
     }
 }
 
