@@ -1,36 +1,45 @@
 //! The daemon: loads the machine, runs the servo thread, serves the command
-//! socket and feeds programs to the servo.
+//! socket and feeds motion to the servo.
 //!
-//! A program is checked whole before anything moves (every block
-//! interpreted and every move planned against the machine's limits); only
-//! then is it streamed again, interpreted and planned just ahead of the
-//! machine into the lock-free queue the servo tick reads.
+//! Everything that moves the machine — a program, an MDI line, a jog, homing
+//! — is a *job*: canon commands checked whole against the machine's limits
+//! before anything moves, then interpreted and planned again just ahead of
+//! the machine by a planner thread that feeds the lock-free queue the servo
+//! tick reads, ending with a `Stop` marker carrying the job's tag. The servo
+//! reports the last tag it reached (`program_done`) or discarded
+//! (`program_aborted`), which is how [`Control`] learns that a job ended.
 
-use std::io::BufRead;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use kerf_interp::{Interpreter, Position};
+use kerf_interp::{Axis, Canon, CanonCmd, Interpreter, Position, Source};
 use kerf_machines::Machine;
-use kerf_motion::{Kinematics, Planner, PlannerConfig, Segment, SegmentKind};
+use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment, SegmentKind};
 use serde_json::{json, Map, Value};
-use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncWriteExt, BufReader};
-use tokio::net::{UnixListener, UnixStream};
-use tokio::sync::mpsc;
+use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::net::{TcpListener, UnixListener};
+use tokio::sync::{broadcast, mpsc};
 
+use crate::machine::{Control, JobKind, Program, Refusal};
 use crate::protocol::{
-    self, Command, ErrorCode, Event, MachineState, ProgramState, ProgramStatus, ServerLine,
+    self, Command, ErrorCode, Event, Fields, JointRef, MachineState, Overrides, ServerLine,
     ServoStatus, Status, PROTOCOL_VERSION,
 };
 use crate::seqlock::{seqlock, Reader};
-use crate::servo::{ServoCommand, ServoThread, ServoTick, Snapshot};
+use crate::servo::{ServoCommand, ServoThread, ServoTick, Snapshot, LATENCY_BOUNDS_NS};
+use crate::state::{Parameters, Store, Tool, COORDINATE_SYSTEMS};
 
 /// Segments the planner may run ahead of the servo: the executor looks
 /// ahead over all of them (at least 2000 segments, and 0.5 s of motion even
 /// for 0.02 mm segments at 2 m/min).
 const QUEUE_CAPACITY: usize = 8192;
+
+/// How often the daemon looks at the servo for faults, ended jobs, lines
+/// and messages, and so the longest delay of a state event.
+const OBSERVE_PERIOD: Duration = Duration::from_millis(5);
 
 /// How the daemon is started.
 #[derive(Clone, Debug)]
@@ -39,41 +48,52 @@ pub struct Options {
     pub machine: String,
     /// Servo period, µs (250 to 10000).
     pub period_us: u32,
+    /// `SCHED_FIFO` priority of the servo thread, 1 to 99; 0 leaves it at
+    /// normal priority.
+    pub priority: u8,
+    /// CPU to pin the servo thread to.
+    pub cpu: Option<usize>,
+    /// Where the parameter file and tool table live.
+    pub state_dir: PathBuf,
+    /// Bearer token TCP clients must present with `auth` (none: TCP needs
+    /// none, which the configuration allows only on loopback).
+    pub tcp_token: Option<String>,
 }
 
-impl Default for Options {
-    fn default() -> Self {
-        Options {
-            machine: kerf_machines::DEFAULT_MACHINE.into(),
-            period_us: 1000,
-        }
-    }
+/// The planner end of the servo queue, with the count of items ever
+/// pushed through it (compared with the servo's count of consumed items).
+struct Feed {
+    producer: rtrb::Producer<Segment>,
+    pushed: u64,
 }
 
-struct ProgramInfo {
-    id: u32,
-    file: String,
-    lines: u32,
-    error: Option<String>,
-}
-
-struct Programs {
-    current: Option<ProgramInfo>,
-    next_id: u32,
-    /// The planner end of the servo queue; taken by the streaming thread
-    /// while a program streams.
-    producer: Option<rtrb::Producer<Segment>>,
+/// Where a job's canon commands come from.
+enum JobSource {
+    /// A program file, interpreted again while streaming.
+    File(PathBuf),
+    /// Canon already produced and checked (MDI, jog, homing).
+    Canons(Vec<Canon>),
 }
 
 struct Shared {
     machine: String,
     kins: Arc<dyn Kinematics>,
+    /// The pose every joint at its home position gives.
+    home_pose: Position,
     status: Reader<Snapshot>,
     period_us: u32,
     planner: PlannerConfig,
-    programs: Mutex<Programs>,
+    control: Mutex<Control>,
+    /// The queue's producer, away while a planner thread streams.
+    feed: Mutex<Option<Feed>>,
+    feed_back: Condvar,
     /// Operator commands to the servo thread.
     commands: Mutex<rtrb::Producer<ServoCommand>>,
+    /// Machine events, as lines ready to send.
+    events: broadcast::Sender<Arc<str>>,
+    store: Mutex<Store>,
+    tcp_token: Option<String>,
+    next_client: AtomicU64,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -83,7 +103,8 @@ pub struct Daemon {
 }
 
 impl Daemon {
-    /// Load the machine, build its HAL and start the servo thread.
+    /// Load the machine and the state directory, build the HAL and start
+    /// the servo thread. The machine starts in e-stop.
     pub fn start(options: &Options) -> anyhow::Result<Daemon> {
         if !(250..=10_000).contains(&options.period_us) {
             bail!(
@@ -96,6 +117,7 @@ impl Daemon {
             kinematics,
             origin,
         } = kerf_machines::load(&options.machine)?;
+        let store = Store::open(&options.state_dir)?;
         let hal_config: kerf_io::HalConfig = description
             .hal
             .clone()
@@ -107,6 +129,15 @@ impl Daemon {
         kinematics
             .inverse(&start, &mut joints)
             .map_err(|e| anyhow::anyhow!("{origin}: the machine origin is not reachable: {e}"))?;
+        let home_joints: Vec<f64> = description
+            .joints
+            .iter()
+            .zip(&joints)
+            .map(|(j, at_origin)| j.home.unwrap_or(*at_origin))
+            .collect();
+        let home_pose = kinematics
+            .forward(&home_joints, &start)
+            .map_err(|e| anyhow::anyhow!("{origin}: the home pose is not reachable: {e}"))?;
         let hal = kerf_io::build(&hal_config, &joints).with_context(|| origin.clone())?;
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         let (commands, command_queue) = rtrb::RingBuffer::new(64);
@@ -129,25 +160,40 @@ impl Daemon {
             tick.export_to(export, kerf_io::PinBank::new(&hal_config.pins));
             tracing::info!(%instance, "status and pins exported over shared memory");
         }
+        let limits: Vec<Option<f64>> = description
+            .joints
+            .iter()
+            .map(|j| j.following_error)
+            .collect();
+        tick.set_following_error_limits(&limits);
         let (writer, reader) = seqlock(*tick.snapshot());
-        let servo = ServoThread::spawn(tick, writer).context("cannot start the servo thread")?;
-        tracing::info!(machine = %description.name, %origin, period_us = options.period_us, "servo running");
+        let servo = ServoThread::spawn(tick, writer, options.priority, options.cpu)
+            .context("cannot start the servo thread")?;
+        tracing::info!(machine = %description.name, %origin, period_us = options.period_us,
+            state_dir = %options.state_dir.display(), "servo running");
+        let joint_names = kinematics.joints().iter().map(|j| j.name.clone()).collect();
         Ok(Daemon {
             shared: Arc::new(Shared {
                 machine: description.name,
                 kins: kinematics,
+                home_pose,
                 status: reader,
                 period_us: options.period_us,
                 planner: PlannerConfig {
                     period,
                     ..PlannerConfig::default()
                 },
+                control: Mutex::new(Control::new(joint_names)),
+                feed: Mutex::new(Some(Feed {
+                    producer,
+                    pushed: 0,
+                })),
+                feed_back: Condvar::new(),
                 commands: Mutex::new(commands),
-                programs: Mutex::new(Programs {
-                    current: None,
-                    next_id: 1,
-                    producer: Some(producer),
-                }),
+                events: broadcast::channel(1024).0,
+                store: Mutex::new(store),
+                tcp_token: options.tcp_token.clone(),
+                next_client: AtomicU64::new(1),
             }),
             servo,
         })
@@ -158,33 +204,123 @@ impl Daemon {
         self.shared.status()
     }
 
-    /// Serve clients on `listener` until `shutdown` completes.
+    /// A reader of the servo's snapshots, for watchers outside the socket
+    /// (the systemd watchdog).
+    pub fn snapshot_reader(&self) -> Reader<Snapshot> {
+        self.shared.status.clone()
+    }
+
+    /// Machine events as they happen, for watchers outside the socket (the
+    /// systemd status line).
+    pub fn events(&self) -> broadcast::Receiver<Arc<str>> {
+        self.shared.events.subscribe()
+    }
+
+    /// Serve clients on the Unix socket `unix` and, when given, on `tcp`,
+    /// until `shutdown` completes. Also watches the servo for faults, ended
+    /// jobs and messages, and turns them into events.
     pub async fn serve(
         &self,
-        listener: UnixListener,
+        unix: UnixListener,
+        tcp: Option<TcpListener>,
         shutdown: impl std::future::Future<Output = ()>,
     ) {
+        let watcher = {
+            let shared = self.shared.clone();
+            tokio::spawn(async move {
+                let mut interval = tokio::time::interval(OBSERVE_PERIOD);
+                interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+                loop {
+                    interval.tick().await;
+                    drop(shared.observe());
+                }
+            })
+        };
         tokio::pin!(shutdown);
         loop {
             tokio::select! {
                 _ = &mut shutdown => break,
-                accepted = listener.accept() => match accepted {
-                    Ok((stream, _)) => {
-                        let shared = self.shared.clone();
-                        tokio::spawn(async move { serve_client(stream, shared).await });
-                    }
+                accepted = unix.accept() => match accepted {
+                    Ok((stream, _)) => self.spawn_client(stream, false),
                     Err(e) => {
                         tracing::warn!("accept failed: {e}");
                         tokio::time::sleep(Duration::from_millis(10)).await;
                     }
                 },
+                accepted = accept_tcp(tcp.as_ref()) => match accepted {
+                    Ok((stream, peer)) => {
+                        tracing::info!(%peer, "TCP client");
+                        let _ = stream.set_nodelay(true);
+                        self.spawn_client(stream, self.shared.tcp_token.is_some());
+                    }
+                    Err(e) => {
+                        tracing::warn!("TCP accept failed: {e}");
+                        tokio::time::sleep(Duration::from_millis(10)).await;
+                    }
+                },
             }
         }
+        watcher.abort();
+    }
+
+    fn spawn_client<S: AsyncRead + AsyncWrite + Send + 'static>(&self, stream: S, auth: bool) {
+        let shared = self.shared.clone();
+        tokio::spawn(async move { serve_client(stream, shared, auth).await });
     }
 
     /// Send an operator command to the servo thread.
-    pub fn servo_command(&self, cmd: ServoCommand) -> Result<(), ServoCommand> {
-        self.shared.servo_command(cmd)
+    pub fn servo_command(&self, cmd: ServoCommand) -> Result<(), Refusal> {
+        self.shared.send(cmd)
+    }
+
+    /// Stop in order: a job in progress decelerates to rest (at most
+    /// `timeout`), the drives go off, the state is written, the servo thread
+    /// stops. Returns what it did, for the log.
+    pub async fn shutdown(&mut self, timeout: Duration) -> String {
+        let shared = self.shared.clone();
+        let mut report = String::from("no motion in progress");
+        let tag = shared.observe().abort(false).ok();
+        if let Some(tag) = tag {
+            let _ = shared.send(ServoCommand::Abort { program: tag });
+            let started = Instant::now();
+            let stopped = loop {
+                if shared.observe().job().is_none() {
+                    break true;
+                }
+                if started.elapsed() > timeout {
+                    break false;
+                }
+                tokio::time::sleep(OBSERVE_PERIOD).await;
+            };
+            report = if stopped {
+                format!(
+                    "motion stopped on the path in {:.3} s",
+                    started.elapsed().as_secs_f64()
+                )
+            } else {
+                format!("motion did not stop within {timeout:?}: drives switched off")
+            };
+        }
+        shared.observe().estop();
+        let _ = shared.send(ServoCommand::Enable(false));
+        let flushed = {
+            let store = shared.store.lock().expect("store lock poisoned");
+            store.flush()
+        };
+        if let Err(e) = flushed {
+            tracing::error!("cannot write the state: {e}");
+            report.push_str(&format!("; state NOT written: {e}"));
+        } else {
+            report.push_str("; state written");
+        }
+        // Let the servo see the drives-off command before it stops.
+        let ticks = shared.status.read().ticks;
+        let started = Instant::now();
+        while shared.status.read().ticks < ticks + 2 && started.elapsed() < Duration::from_secs(1) {
+            tokio::time::sleep(Duration::from_millis(1)).await;
+        }
+        self.servo.stop();
+        report
     }
 
     /// Stop the servo thread.
@@ -193,9 +329,19 @@ impl Daemon {
     }
 }
 
+async fn accept_tcp(
+    tcp: Option<&TcpListener>,
+) -> std::io::Result<(tokio::net::TcpStream, std::net::SocketAddr)> {
+    match tcp {
+        Some(l) => l.accept().await,
+        None => std::future::pending().await,
+    }
+}
+
 /// Bind the command socket at `path`: creates the directory, replaces a
-/// stale socket file, refuses if another daemon answers there.
-pub fn bind_socket(path: &Path) -> anyhow::Result<UnixListener> {
+/// stale socket file, refuses if another daemon answers there, and gives the
+/// socket mode 0660 and, when named, the group `group`.
+pub fn bind_socket(path: &Path, group: Option<&str>) -> anyhow::Result<UnixListener> {
     use std::os::unix::fs::PermissionsExt;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
@@ -215,70 +361,159 @@ pub fn bind_socket(path: &Path) -> anyhow::Result<UnixListener> {
         UnixListener::bind(path).with_context(|| format!("cannot listen on {}", path.display()))?;
     std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o660))
         .with_context(|| format!("cannot set permissions on {}", path.display()))?;
+    if let Some(name) = group {
+        let group = nix::unistd::Group::from_name(name)
+            .with_context(|| format!("cannot look up group {name:?}"))?
+            .with_context(|| format!("socket group {name:?} does not exist"))?;
+        nix::unistd::chown(path, None, Some(group.gid)).with_context(|| {
+            format!(
+                "cannot give socket {} to group {name:?} (kerfd must run as root or be a member)",
+                path.display()
+            )
+        })?;
+    }
     Ok(listener)
 }
 
 impl Shared {
-    /// Queue a command for the servo thread; fails if 64 are already waiting.
-    fn servo_command(&self, cmd: ServoCommand) -> Result<(), ServoCommand> {
+    /// Queue a command for the servo thread.
+    fn send(&self, cmd: ServoCommand) -> Result<(), Refusal> {
         let mut commands = self.commands.lock().expect("command lock poisoned");
-        commands.push(cmd).map_err(|rtrb::PushError::Full(c)| c)
+        commands.push(cmd).map_err(|_| {
+            (
+                ErrorCode::Busy,
+                "the servo is not taking commands (64 waiting); try again".into(),
+            )
+        })
+    }
+
+    /// Bring the state machine up to date with the servo, publish the
+    /// events that produced, and hand back the locked state machine.
+    fn observe(&self) -> MutexGuard<'_, Control> {
+        let mut control = self.control.lock().expect("control lock poisoned");
+        let snap = self.status.read();
+        let events = control.observe(&snap, || {
+            snap.fault
+                .map(|f| f.describe(&*self.kins))
+                .unwrap_or_default()
+        });
+        for e in events {
+            // Sent under the lock, so every client sees events in order.
+            let line: Arc<str> = ServerLine::Event(e).to_line().into();
+            let _ = self.events.send(line);
+        }
+        control
+    }
+
+    fn axes_map(&self, p: &Position) -> Map<String, Value> {
+        self.kins
+            .axes()
+            .iter()
+            .map(|spec| {
+                (
+                    spec.axis.letter().to_ascii_lowercase().to_string(),
+                    json!(p.get(spec.axis)),
+                )
+            })
+            .collect()
     }
 
     fn status(&self) -> Status {
+        let control = self.observe();
         let snap = self.status.read();
-        let program = {
-            let programs = self.programs.lock().expect("program lock poisoned");
-            programs.current.as_ref().map(|p| {
-                let mut error = p.error.clone();
-                let state = if error.is_some() {
-                    ProgramState::Failed
-                } else if snap.program_done >= p.id {
-                    ProgramState::Finished
-                } else if let Some(fault) = snap.fault {
-                    error = Some(format!("stopped by fault: {fault}"));
-                    ProgramState::Failed
-                } else {
-                    ProgramState::Running
-                };
-                ProgramStatus {
-                    id: p.id,
-                    file: p.file.clone(),
-                    state,
-                    lines: p.lines,
-                    error,
-                }
-            })
-        };
-        let state = if snap.fault.is_some() {
-            MachineState::Fault
-        } else if program
-            .as_ref()
-            .is_some_and(|p| p.state == ProgramState::Running)
-        {
-            MachineState::Running
-        } else {
-            MachineState::Idle
-        };
-        let mut position = Map::new();
-        for spec in self.kins.axes() {
-            let key = spec.axis.letter().to_ascii_lowercase().to_string();
-            position.insert(key, json!(snap.position.get(spec.axis)));
-        }
+        let (state, execution) = control.state();
+        let program = control.program().map(|p| p.status.clone());
+        let histogram = LATENCY_BOUNDS_NS
+            .iter()
+            .map(|b| Some(*b as f64 / 1000.0))
+            .chain([None])
+            .zip(snap.latency_histogram)
+            .collect();
         Status {
             machine: self.machine.clone(),
             state,
+            execution,
+            homed: control.homed().to_vec(),
             line: snap.line,
-            position,
+            position: self.axes_map(&snap.position),
+            commanded: self.axes_map(&snap.commanded),
             joints: snap.joints[..snap.joint_count].to_vec(),
+            velocity: snap.velocity * 60.0,
+            overrides: Overrides {
+                feed: snap.feed_override * 100.0,
+                rapid: snap.rapid_override * 100.0,
+            },
+            job: control.job_status().cloned(),
             program,
-            fault: snap.fault.map(|f| f.to_string()),
+            fault: control.fault().map(str::to_string),
             servo: ServoStatus {
                 period_us: self.period_us,
                 ticks: snap.ticks,
                 overruns: snap.overruns,
+                latency_max_us: snap.latency_max_ns as f64 / 1000.0,
+                latency_histogram: histogram,
             },
         }
+    }
+
+    /// Resolve a joint reference to its index.
+    fn joint(&self, j: &JointRef) -> Result<usize, Refusal> {
+        let joints = self.kins.joints();
+        let found = match j {
+            JointRef::Index(i) => (*i < joints.len()).then_some(*i),
+            JointRef::Name(name) => joints.iter().position(|s| &s.name == name),
+        };
+        found.ok_or_else(|| {
+            let names: Vec<&str> = joints.iter().map(|s| s.name.as_str()).collect();
+            (
+                ErrorCode::InvalidArgument,
+                format!(
+                    "no joint {}: this machine has joints {} (or 0 to {})",
+                    match j {
+                        JointRef::Index(i) => i.to_string(),
+                        JointRef::Name(n) => format!("{n:?}"),
+                    },
+                    names.join(", "),
+                    joints.len() - 1
+                ),
+            )
+        })
+    }
+
+    /// The axis a joint drives alone, for jogging and homing it.
+    fn joint_axis(&self, j: usize) -> Result<Axis, Refusal> {
+        self.kins.joint_axis(j).ok_or_else(|| {
+            (
+                ErrorCode::InvalidArgument,
+                format!(
+                    "joint {} does not drive a single axis on this machine's kinematics, so it cannot be moved on its own",
+                    self.kins.joints()[j].name
+                ),
+            )
+        })
+    }
+
+    fn axis(&self, letter: &str) -> Result<Axis, Refusal> {
+        letter
+            .chars()
+            .next()
+            .filter(|_| letter.chars().count() == 1)
+            .and_then(Axis::from_letter)
+            .filter(|a| self.kins.axes().iter().any(|s| s.axis == *a))
+            .ok_or_else(|| {
+                (
+                    ErrorCode::InvalidArgument,
+                    format!(
+                        "no axis {letter:?}: this machine has axes {}",
+                        self.kins
+                            .axes()
+                            .iter()
+                            .map(|s| s.axis.letter().to_ascii_lowercase().to_string())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })
     }
 }
 
@@ -330,8 +565,32 @@ async fn read_frame<R: AsyncBufRead + Unpin>(
     }
 }
 
-async fn serve_client(stream: UnixStream, shared: Arc<Shared>) {
-    let (read_half, mut write_half) = stream.into_split();
+/// One client's connection.
+struct Connection {
+    id: u64,
+    /// Still has to present the bearer token.
+    needs_auth: bool,
+    tx: mpsc::Sender<String>,
+    subscription: Vec<tokio::task::JoinHandle<()>>,
+}
+
+impl Connection {
+    /// Stop this client's event tasks and wait until they have stopped, so
+    /// no event of the old subscription follows the reply.
+    async fn unsubscribe(&mut self) {
+        for task in self.subscription.drain(..) {
+            task.abort();
+            let _ = task.await;
+        }
+    }
+}
+
+async fn serve_client<S: AsyncRead + AsyncWrite + Send + 'static>(
+    stream: S,
+    shared: Arc<Shared>,
+    needs_auth: bool,
+) {
+    let (read_half, mut write_half) = tokio::io::split(stream);
     // Replies wait for room; status events are dropped for a client too slow
     // to take them, so one slow client never holds up anything else.
     let (tx, mut rx) = mpsc::channel::<String>(256);
@@ -342,9 +601,14 @@ async fn serve_client(stream: UnixStream, shared: Arc<Shared>) {
             }
         }
     });
+    let mut conn = Connection {
+        id: shared.next_client.fetch_add(1, Ordering::Relaxed),
+        needs_auth,
+        tx,
+        subscription: Vec::new(),
+    };
     let mut reader = BufReader::new(read_half);
     let mut buf = Vec::new();
-    let mut subscription: Option<tokio::task::JoinHandle<()>> = None;
     loop {
         let reply = match read_frame(&mut reader, &mut buf).await {
             Ok(Frame::Eof) | Err(_) => break,
@@ -356,64 +620,371 @@ async fn serve_client(stream: UnixStream, shared: Arc<Shared>) {
             Ok(Frame::Line) if buf.iter().all(|b| b.is_ascii_whitespace()) => continue,
             Ok(Frame::Line) => match protocol::parse_request(&buf) {
                 Err(reply) => reply,
-                Ok((id, Command::Hello)) => ServerLine::ok(
-                    id,
-                    json!({"protocol": PROTOCOL_VERSION, "server": "kerfd", "version": env!("CARGO_PKG_VERSION"), "machine": shared.machine}),
-                ),
-                Ok((id, Command::Status)) => ServerLine::ok(id, json!(shared.status())),
-                Ok((id, Command::Run { path })) => match run_program(&shared, &path).await {
+                Ok((id, cmd)) => match handle(&shared, &mut conn, cmd).await {
                     Ok(v) => ServerLine::ok(id, v),
                     Err((code, message)) => ServerLine::error(id, code, message),
                 },
-                Ok((id, Command::Subscribe { rate_hz })) => {
-                    if !(1.0..=1000.0).contains(&rate_hz) {
-                        ServerLine::error(
-                            id,
-                            ErrorCode::InvalidArgument,
-                            format!("rate_hz {rate_hz} is out of range: use 1 to 1000"),
-                        )
-                    } else {
-                        if let Some(old) = subscription.take() {
-                            old.abort();
-                        }
-                        subscription =
-                            Some(spawn_subscription(shared.clone(), tx.clone(), rate_hz));
-                        ServerLine::ok(id, json!({"rate_hz": rate_hz}))
-                    }
-                }
-                Ok((id, Command::Unsubscribe)) => {
-                    if let Some(old) = subscription.take() {
-                        old.abort();
-                    }
-                    ServerLine::ok(id, json!({}))
-                }
             },
         };
-        if tx.send(reply.to_line()).await.is_err() {
+        if conn.tx.send(reply.to_line()).await.is_err() {
             break;
         }
     }
-    if let Some(s) = subscription {
-        s.abort();
+    conn.unsubscribe().await;
+    // A continuous jog is a dead man's switch: it stops with its client.
+    let orphan = shared.observe().stop_orphaned_jog(conn.id);
+    if let Some(tag) = orphan {
+        tracing::info!(
+            client = conn.id,
+            "jogging client disconnected: stopping the jog"
+        );
+        let _ = shared.send(ServoCommand::Abort { program: tag });
     }
-    drop(tx);
+    drop(conn);
     let _ = writer.await;
 }
 
-fn spawn_subscription(
+fn invalid(message: impl Into<String>) -> Refusal {
+    (ErrorCode::InvalidArgument, message.into())
+}
+
+/// Carry out one request.
+async fn handle(
+    shared: &Arc<Shared>,
+    conn: &mut Connection,
+    cmd: Command,
+) -> Result<Value, Refusal> {
+    if conn.needs_auth && !matches!(cmd, Command::Hello | Command::Auth { .. }) {
+        return Err((
+            ErrorCode::Unauthorized,
+            "this connection must present its token first: {\"cmd\": \"auth\", \"token\": \"...\"}"
+                .into(),
+        ));
+    }
+    match cmd {
+        Command::Hello => Ok(json!({
+            "protocol": PROTOCOL_VERSION,
+            "server": "kerfd",
+            "version": env!("CARGO_PKG_VERSION"),
+            "machine": shared.machine,
+            "auth_required": conn.needs_auth,
+        })),
+        Command::Auth { token } => {
+            let expected = shared.tcp_token.as_deref().unwrap_or("");
+            if shared.tcp_token.is_some()
+                && !constant_time_eq(token.as_bytes(), expected.as_bytes())
+            {
+                tracing::warn!(client = conn.id, "wrong bearer token");
+                return Err((ErrorCode::Unauthorized, "wrong token".into()));
+            }
+            conn.needs_auth = false;
+            Ok(json!({}))
+        }
+        Command::Status => Ok(json!(shared.status())),
+        Command::Subscribe {
+            rate_hz,
+            fields,
+            events,
+        } => {
+            if let Some(r) = rate_hz.filter(|r| !(1.0..=1000.0).contains(r)) {
+                return Err(invalid(format!(
+                    "rate_hz {r} is out of range: use 1 to 1000"
+                )));
+            }
+            conn.unsubscribe().await;
+            if events {
+                conn.subscription
+                    .push(spawn_events(shared.events.subscribe(), conn.tx.clone()));
+            }
+            if let Some(rate) = rate_hz {
+                conn.subscription
+                    .push(spawn_status(shared.clone(), conn.tx.clone(), rate, fields));
+            }
+            Ok(json!({"rate_hz": rate_hz, "fields": fields, "events": events}))
+        }
+        Command::Unsubscribe => {
+            conn.unsubscribe().await;
+            Ok(json!({}))
+        }
+        Command::Estop => {
+            shared.observe().estop();
+            shared.send(ServoCommand::Enable(false))?;
+            tracing::warn!(client = conn.id, "e-stop");
+            Ok(json!({}))
+        }
+        Command::Reset => {
+            // A faulted job ends once the servo has discarded its queue,
+            // within a few periods of the fault; give it that long.
+            let started = Instant::now();
+            loop {
+                let outcome = {
+                    let mut control = shared.observe();
+                    let was_fault = control.fault().is_some();
+                    control.reset().map(|()| was_fault)
+                };
+                match outcome {
+                    Err((ErrorCode::Busy, _)) if started.elapsed() < Duration::from_secs(2) => {
+                        tokio::time::sleep(OBSERVE_PERIOD).await;
+                    }
+                    Err(e) => return Err(e),
+                    Ok(was_fault) => {
+                        if was_fault {
+                            shared.send(ServoCommand::ClearFault)?;
+                        }
+                        return Ok(json!({}));
+                    }
+                }
+            }
+        }
+        Command::On => operator(shared, Control::on, &[ServoCommand::Enable(true)]),
+        Command::Off => operator(shared, Control::off, &[ServoCommand::Enable(false)]),
+        Command::Home { joint } => home(shared, joint).await,
+        Command::Jog {
+            axis,
+            joint,
+            direction,
+            speed,
+            distance,
+        } => jog(shared, conn.id, axis, joint, direction, speed, distance).await,
+        Command::JogStop => {
+            let mut control = shared.observe();
+            let tag = control.abort(true)?;
+            shared.send(ServoCommand::Abort { program: tag })?;
+            Ok(json!({}))
+        }
+        Command::Mdi { line } => mdi(shared, line).await,
+        Command::Open { path } => {
+            let path = absolute(&path)?;
+            if matches!(
+                shared.observe().job().map(|j| &j.kind),
+                Some(JobKind::Program)
+            ) {
+                return Err((ErrorCode::Busy, "cannot open: a program is running".into()));
+            }
+            let start = shared.status.read().commanded;
+            let lines = check_file(shared, &path, start, 1).await?;
+            let program = Program::ready(path, lines, 1);
+            let file = program.status.file.clone();
+            shared.observe().set_opened(program);
+            Ok(json!({"file": file, "lines": lines}))
+        }
+        Command::Run { path, line } => run(shared, path, line, false).await,
+        Command::Pause => operator(shared, Control::pause, &[ServoCommand::Hold(true)]),
+        Command::Resume => operator(
+            shared,
+            Control::resume,
+            &[ServoCommand::SingleBlock(false), ServoCommand::Hold(false)],
+        ),
+        Command::Step => {
+            let stepping_program = {
+                let mut control = shared.observe();
+                if control.state().0 == MachineState::Idle {
+                    false
+                } else {
+                    control.step()?;
+                    shared.send(ServoCommand::SingleBlock(true))?;
+                    shared.send(ServoCommand::Hold(false))?;
+                    shared.send(ServoCommand::Step)?;
+                    true
+                }
+            };
+            if stepping_program {
+                Ok(json!({}))
+            } else {
+                run(shared, None, None, true).await
+            }
+        }
+        Command::Abort => {
+            let mut control = shared.observe();
+            let tag = control.abort(false)?;
+            shared.send(ServoCommand::Abort { program: tag })?;
+            Ok(json!({"aborted": tag}))
+        }
+        Command::Override { feed, rapid } => {
+            if feed.is_none() && rapid.is_none() {
+                return Err(invalid(
+                    "give `feed` (0–200) and/or `rapid` (0–100), percent",
+                ));
+            }
+            if let Some(f) = feed.filter(|f| !(0.0..=200.0).contains(f)) {
+                return Err(invalid(format!(
+                    "feed override {f} % is out of range 0 to 200"
+                )));
+            }
+            if let Some(r) = rapid.filter(|r| !(0.0..=100.0).contains(r)) {
+                return Err(invalid(format!(
+                    "rapid override {r} % is out of range 0 to 100"
+                )));
+            }
+            if let Some(f) = feed {
+                shared.send(ServoCommand::FeedOverride(f / 100.0))?;
+            }
+            if let Some(r) = rapid {
+                shared.send(ServoCommand::RapidOverride(r / 100.0))?;
+            }
+            Ok(json!({"feed": feed, "rapid": rapid}))
+        }
+        Command::Offsets => {
+            let store = shared.store.lock().expect("store lock poisoned");
+            Ok(offsets_json(shared, store.parameters()))
+        }
+        Command::SetOffset { system, values } => set_offset(shared, &system, &values).await,
+        Command::Tools => {
+            let store = shared.store.lock().expect("store lock poisoned");
+            let tools: Vec<Value> = store
+                .tools()
+                .values()
+                .map(|t| tool_json(shared, t))
+                .collect();
+            Ok(json!({ "tools": tools }))
+        }
+        Command::SetTool {
+            tool,
+            pocket,
+            offsets,
+            diameter,
+            comment,
+        } => {
+            if tool == 0 {
+                return Err(invalid("tool numbers start at 1"));
+            }
+            let offsets = offsets.map(|o| axis_values(shared, &o)).transpose()?;
+            if let Some(d) = diameter.filter(|d| !(d.is_finite() && *d >= 0.0)) {
+                return Err(invalid(format!("diameter {d} must be 0 or more")));
+            }
+            if comment.as_deref().is_some_and(|c| c.contains(['\n', '\r'])) {
+                return Err(invalid("a tool comment is one line"));
+            }
+            let shared2 = shared.clone();
+            let entry = blocking(move || {
+                let mut store = shared2.store.lock().expect("store lock poisoned");
+                let mut tools = store.tools().clone();
+                let entry = tools.entry(tool).or_insert_with(|| Tool::new(tool));
+                if let Some(p) = pocket {
+                    entry.pocket = p;
+                }
+                for (axis, v) in offsets.into_iter().flatten() {
+                    entry.offsets[axis.index()] = v;
+                }
+                if let Some(d) = diameter {
+                    entry.diameter = d;
+                }
+                if let Some(c) = comment {
+                    entry.comment = c;
+                }
+                let entry = entry.clone();
+                store.set_tools(tools).map_err(io_refusal)?;
+                Ok(entry)
+            })
+            .await?;
+            Ok(tool_json(shared, &entry))
+        }
+        Command::RemoveTool { tool } => {
+            let shared2 = shared.clone();
+            blocking(move || {
+                let mut store = shared2.store.lock().expect("store lock poisoned");
+                let mut tools = store.tools().clone();
+                if tools.remove(&tool).is_none() {
+                    return Err(invalid(format!("no tool {tool} in the table")));
+                }
+                store.set_tools(tools).map_err(io_refusal)
+            })
+            .await?;
+            Ok(json!({}))
+        }
+    }
+}
+
+/// An operator command that only changes state: apply `change` to the
+/// state machine and, if it allows it, send `commands` to the servo (under
+/// the same lock, so commands reach the servo in the order of the changes).
+fn operator(
+    shared: &Shared,
+    change: fn(&mut Control) -> Result<(), Refusal>,
+    commands: &[ServoCommand],
+) -> Result<Value, Refusal> {
+    let mut control = shared.observe();
+    change(&mut control)?;
+    for cmd in commands {
+        shared.send(*cmd)?;
+    }
+    Ok(json!({}))
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    // Compare every byte whatever the first difference, so the time taken
+    // does not tell an attacker how much of a guess was right.
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+fn io_refusal(e: crate::state::StateError) -> Refusal {
+    tracing::error!("{e}");
+    (ErrorCode::IoError, e.to_string())
+}
+
+/// Run blocking work (file I/O, program checks) off the async workers.
+async fn blocking<T: Send + 'static>(
+    f: impl FnOnce() -> Result<T, Refusal> + Send + 'static,
+) -> Result<T, Refusal> {
+    tokio::task::spawn_blocking(f)
+        .await
+        .map_err(|e| (ErrorCode::IoError, format!("internal task failed: {e}")))?
+}
+
+fn spawn_events(
+    mut events: broadcast::Receiver<Arc<str>>,
+    tx: mpsc::Sender<String>,
+) -> tokio::task::JoinHandle<()> {
+    tokio::spawn(async move {
+        loop {
+            let line = match events.recv().await {
+                Ok(line) => line.to_string(),
+                Err(broadcast::error::RecvError::Lagged(missed)) => {
+                    ServerLine::Event(Event::Lagged { missed }).to_line()
+                }
+                Err(broadcast::error::RecvError::Closed) => break,
+            };
+            // Machine events wait for the client (a fault must not be
+            // dropped); a client that falls 1024 events behind is told.
+            if tx.send(line).await.is_err() {
+                break;
+            }
+        }
+    })
+}
+
+fn spawn_status(
     shared: Arc<Shared>,
     tx: mpsc::Sender<String>,
     rate_hz: f64,
+    fields: Fields,
 ) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
         let mut interval = tokio::time::interval(Duration::from_secs_f64(1.0 / rate_hz));
         interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        let mut last: Map<String, Value> = Map::new();
         loop {
             interval.tick().await;
-            let line = ServerLine::Event(Event::Status {
-                status: shared.status(),
-            })
-            .to_line();
+            let status = shared.status();
+            let event = match fields {
+                Fields::Full => Event::Status { status },
+                Fields::Changed => {
+                    let Value::Object(now) = json!(status) else {
+                        continue;
+                    };
+                    let changes: Map<String, Value> = now
+                        .iter()
+                        .filter(|(k, v)| last.get(*k) != Some(v))
+                        .map(|(k, v)| (k.clone(), v.clone()))
+                        .collect();
+                    last = now;
+                    if changes.is_empty() {
+                        continue;
+                    }
+                    Event::Changes { changes }
+                }
+            };
+            let line = ServerLine::Event(event).to_line();
             if let Err(mpsc::error::TrySendError::Closed(_)) = tx.try_send(line) {
                 break;
             }
@@ -421,168 +992,633 @@ fn spawn_subscription(
     })
 }
 
-type Refusal = (ErrorCode, String);
-
-/// Check the program whole, then start streaming it to the servo.
-async fn run_program(shared: &Arc<Shared>, path: &str) -> Result<Value, Refusal> {
+fn absolute(path: &str) -> Result<PathBuf, Refusal> {
     let path = PathBuf::from(path);
     if !path.is_absolute() {
-        return Err((
-            ErrorCode::InvalidArgument,
-            format!(
-                "program path {} must be absolute (the daemon has its own working directory)",
-                path.display()
-            ),
-        ));
+        return Err(invalid(format!(
+            "program path {} must be absolute (the daemon has its own working directory)",
+            path.display()
+        )));
     }
-    let status = shared.status();
-    match status.state {
-        MachineState::Fault => {
-            return Err((
-                ErrorCode::Fault,
-                format!("machine fault: {}", status.fault.unwrap_or_default()),
-            ));
-        }
-        MachineState::Running => return Err((ErrorCode::Busy, "a program is running".into())),
-        MachineState::Idle => {}
+    Ok(path)
+}
+
+/// Run a program: `path`, or the opened one; from `line`; in single-block
+/// mode when `single_block`.
+async fn run(
+    shared: &Arc<Shared>,
+    path: Option<String>,
+    line: Option<u32>,
+    single_block: bool,
+) -> Result<Value, Refusal> {
+    let what = if single_block { "step" } else { "run" };
+    shared.observe().check_motion(what, true)?;
+    let path = match path {
+        Some(p) => absolute(&p)?,
+        None => shared
+            .observe()
+            .program()
+            .map(|p| p.path.clone())
+            .ok_or_else(|| {
+                (
+                    ErrorCode::InvalidState,
+                    format!("cannot {what}: no program is open; `open` one or give `path`"),
+                )
+            })?,
+    };
+    let from_line = line.unwrap_or(1);
+    if from_line == 0 {
+        return Err(invalid("lines count from 1"));
     }
     let start = shared.status.read().commanded;
-    let kins = shared.kins.clone();
-    let check_path = path.clone();
-    let config = shared.planner;
-    let lines =
-        tokio::task::spawn_blocking(move || check_program(&check_path, &*kins, start, config))
-            .await
-            .map_err(|e| (ErrorCode::IoError, format!("program check failed: {e}")))??;
+    let lines = check_file(shared, &path, start, from_line).await?;
+    let program = Program::ready(path.clone(), lines, from_line);
+    let id = start_job(
+        shared,
+        what,
+        JobKind::Program,
+        Some(program),
+        JobSource::File(path),
+        start,
+        from_line,
+        single_block,
+    )
+    .await?;
+    tracing::info!(program = id, lines, from_line, "program started");
+    Ok(json!({"program": id, "lines": lines}))
+}
 
-    let mut programs = shared.programs.lock().expect("program lock poisoned");
-    let Some(producer) = programs.producer.take() else {
-        return Err((ErrorCode::Busy, "a program is still streaming".into()));
+async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
+    if line.contains(['\n', '\r']) {
+        return Err(invalid("MDI takes one line"));
+    }
+    shared.observe().check_motion("run MDI", true)?;
+    let start = shared.status.read().commanded;
+    // The interpreter wants a program end; MDI lines are single blocks.
+    let text = format!("{line}\nM2\n");
+    let canons: Vec<Canon> = Interpreter::from_text(text, "MDI", start)
+        .collect::<Result<_, _>>()
+        .map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+    check_canons(shared, &canons, start)?;
+    let id = start_job(
+        shared,
+        "run MDI",
+        JobKind::Mdi,
+        None,
+        JobSource::Canons(canons),
+        start,
+        1,
+        false,
+    )
+    .await?;
+    Ok(json!({"mdi": id}))
+}
+
+/// A canon command of a job kerfd makes itself (jog, homing): line 1 of
+/// a pseudo-file named after it.
+fn canon(file: &Arc<str>, cmd: CanonCmd) -> Canon {
+    Canon {
+        source: Source::new(file.clone(), 1),
+        cmd,
+    }
+}
+
+async fn home(shared: &Arc<Shared>, joint: Option<JointRef>) -> Result<Value, Refusal> {
+    shared.observe().check_motion("home", false)?;
+    let start = shared.status.read().commanded;
+    let n = shared.kins.joints().len();
+    // The simulated machine always knows where it is: homing is a rapid
+    // move to the home pose, after which the joints count as homed.
+    let (target, joints) = match joint {
+        None => (shared.home_pose, (0..n).collect::<Vec<_>>()),
+        Some(j) => {
+            let j = shared.joint(&j)?;
+            let axis = shared.joint_axis(j)?;
+            let mut target = start;
+            target.set(axis, shared.home_pose.get(axis));
+            let joints = (0..n)
+                .filter(|&k| shared.kins.joint_axis(k) == Some(axis))
+                .collect();
+            (target, joints)
+        }
     };
-    let id = programs.next_id;
-    programs.next_id += 1;
-    programs.current = Some(ProgramInfo {
-        id,
-        file: path.display().to_string(),
-        lines,
-        error: None,
+    let file: Arc<str> = "home".into();
+    let canons = vec![
+        canon(&file, CanonCmd::StraightTraverse { end: target }),
+        canon(&file, CanonCmd::ProgramEnd),
+    ];
+    check_canons(shared, &canons, start)?;
+    let id = start_job(
+        shared,
+        "home",
+        JobKind::Home { joints },
+        None,
+        JobSource::Canons(canons),
+        start,
+        1,
+        false,
+    )
+    .await?;
+    Ok(json!({"home": id}))
+}
+
+#[allow(clippy::too_many_arguments)] // the jog request's own fields
+async fn jog(
+    shared: &Arc<Shared>,
+    client: u64,
+    axis: Option<String>,
+    joint: Option<JointRef>,
+    direction: i32,
+    speed: f64,
+    distance: Option<f64>,
+) -> Result<Value, Refusal> {
+    let axis = match (axis, joint) {
+        (Some(a), None) => shared.axis(&a)?,
+        (None, Some(j)) => {
+            let j = shared.joint(&j)?;
+            shared.joint_axis(j)?
+        }
+        _ => return Err(invalid("give either `axis` or `joint`")),
+    };
+    if direction != 1 && direction != -1 {
+        return Err(invalid(format!("direction {direction}: use 1 or -1")));
+    }
+    if !(speed.is_finite() && speed > 0.0) {
+        return Err(invalid(format!("speed {speed} mm/min must be positive")));
+    }
+    if let Some(d) = distance.filter(|d| !(d.is_finite() && *d > 0.0)) {
+        return Err(invalid(format!("distance {d} must be positive")));
+    }
+    shared.observe().check_motion("jog", true)?;
+    let start = shared.status.read().commanded;
+    let limits = shared
+        .kins
+        .axes()
+        .iter()
+        .find(|s| s.axis == axis)
+        .map(|s| s.limits)
+        .expect("axis() checked the machine has it");
+    let here = start.get(axis);
+    let to = match distance {
+        Some(d) => here + direction as f64 * d,
+        // Continuous: toward the end of travel, until `jog_stop`.
+        None if direction > 0 => limits.max.max(here),
+        None => limits.min.min(here),
+    };
+    let mut target = start;
+    target.set(axis, to);
+    let file: Arc<str> = "jog".into();
+    let canons = vec![
+        canon(&file, CanonCmd::SetFeedRate { mm_per_min: speed }),
+        canon(&file, CanonCmd::StraightFeed { end: target }),
+        canon(&file, CanonCmd::ProgramEnd),
+    ];
+    check_canons(shared, &canons, start).map_err(|(_, m)| invalid(format!("jog refused: {m}")))?;
+    let id = start_job(
+        shared,
+        "jog",
+        JobKind::Jog {
+            client,
+            continuous: distance.is_none(),
+        },
+        None,
+        JobSource::Canons(canons),
+        start,
+        1,
+        false,
+    )
+    .await?;
+    Ok(json!({"jog": id, "target": to}))
+}
+
+/// Take the queue's producer, waiting up to two seconds for the planner
+/// thread of the job before to hand it back (it does right after its last
+/// push, so the wait is short).
+async fn take_feed(shared: &Arc<Shared>) -> Result<Feed, Refusal> {
+    let shared = shared.clone();
+    blocking(move || {
+        let slot = shared.feed.lock().expect("feed lock poisoned");
+        let (mut slot, _) = shared
+            .feed_back
+            .wait_timeout_while(slot, Duration::from_secs(2), |f| f.is_none())
+            .expect("feed lock poisoned");
+        slot.take().ok_or_else(|| {
+            (
+                ErrorCode::Busy,
+                "the previous job is still streaming; try again".into(),
+            )
+        })
+    })
+    .await
+}
+
+fn return_feed(shared: &Shared, feed: Feed) {
+    *shared.feed.lock().expect("feed lock poisoned") = Some(feed);
+    shared.feed_back.notify_all();
+}
+
+/// Start a checked job: re-check the state (it may have changed while the
+/// job was checked), tell the servo the execution mode, and start the
+/// planner thread.
+#[allow(clippy::too_many_arguments)]
+async fn start_job(
+    shared: &Arc<Shared>,
+    what: &str,
+    kind: JobKind,
+    program: Option<Program>,
+    source: JobSource,
+    start: Position,
+    from_line: u32,
+    single_block: bool,
+) -> Result<u32, Refusal> {
+    let needs_homing = !matches!(kind, JobKind::Home { .. });
+    let feed = take_feed(shared).await?;
+    let mut control = shared.observe();
+    let refusal = control.check_motion(what, needs_homing).err().or_else(|| {
+        (shared.status.read().commanded != start).then(|| {
+            (
+                ErrorCode::Busy,
+                format!(
+                    "cannot {what}: the machine moved while the request was checked; try again"
+                ),
+            )
+        })
     });
-    drop(programs);
+    if let Some(r) = refusal {
+        drop(control);
+        return_feed(shared, feed);
+        return Err(r);
+    }
+    let (tag, cancel) = control.start_job(kind, program, single_block);
+    let sent = shared
+        .send(ServoCommand::SingleBlock(single_block))
+        .and_then(|_| shared.send(ServoCommand::Hold(false)))
+        .and_then(|_| {
+            if single_block {
+                shared.send(ServoCommand::Step)
+            } else {
+                Ok(())
+            }
+        });
+    drop(control);
+    sent?;
     let stream_shared = shared.clone();
     std::thread::Builder::new()
-        .name(format!("kerf-plan-{id}"))
-        .spawn(move || stream_program(stream_shared, producer, id, &path, start))
+        .name(format!("kerf-plan-{tag}"))
+        .spawn(move || {
+            let mut config = stream_shared.planner;
+            if single_block {
+                // Stepping stops at every block end, as LinuxCNC does: no
+                // corner blend may span two blocks.
+                config.mode = PathMode::ExactStop;
+            }
+            let job = Stream {
+                tag,
+                source,
+                start,
+                from_line,
+                config,
+                cancel,
+            };
+            stream(stream_shared, feed, job)
+        })
         .map_err(|e| {
             (
                 ErrorCode::IoError,
                 format!("cannot start the planner thread: {e}"),
             )
         })?;
-    tracing::info!(program = id, lines, "program started");
-    Ok(json!({"program": id, "lines": lines}))
+    Ok(tag)
 }
 
-/// Interpret and plan the whole program without moving; returns its line count.
-fn check_program(
-    path: &Path,
-    kins: &dyn Kinematics,
-    start: Position,
-    config: PlannerConfig,
-) -> Result<u32, Refusal> {
-    let io_err = |e: std::io::Error| {
-        (
-            ErrorCode::IoError,
-            format!("cannot read {}: {e}", path.display()),
-        )
-    };
-    let interp = Interpreter::open(path, start).map_err(io_err)?;
-    let mut planner = Planner::new(kins, start, config);
-    for canon in interp {
-        let canon = canon.map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+/// True for canon that a run from a later line skips: what moves, waits or
+/// speaks. The rest (units, feed rate, …) still sets up the modal state.
+/// No catch-all arm, so a new canon command must be sorted here.
+fn skipped_before_start(cmd: &CanonCmd) -> bool {
+    match cmd {
+        CanonCmd::StraightTraverse { .. }
+        | CanonCmd::StraightFeed { .. }
+        | CanonCmd::ArcFeed { .. }
+        | CanonCmd::StraightProbe { .. }
+        | CanonCmd::RigidTap { .. }
+        | CanonCmd::Dwell { .. }
+        | CanonCmd::WaitInput { .. }
+        | CanonCmd::WaitSpindleOrientComplete { .. }
+        | CanonCmd::ProgramStop
+        | CanonCmd::OptionalProgramStop
+        | CanonCmd::PalletShuttle
+        | CanonCmd::Message(_)
+        | CanonCmd::Print(_)
+        | CanonCmd::Log(_)
+        | CanonCmd::LogOpen(_)
+        | CanonCmd::LogAppend(_)
+        | CanonCmd::LogClose => true,
+        CanonCmd::UseLengthUnits(_)
+        | CanonCmd::SetG5xOffset { .. }
+        | CanonCmd::SetG92Offset { .. }
+        | CanonCmd::SetXYRotation { .. }
+        | CanonCmd::UseToolLengthOffset { .. }
+        | CanonCmd::SelectPlane(_)
+        | CanonCmd::SetFeedRate { .. }
+        | CanonCmd::SetFeedMode { .. }
+        | CanonCmd::SetMotionControlMode(_)
+        | CanonCmd::SetNaivecamTolerance { .. }
+        | CanonCmd::SetPlannerMode { .. }
+        | CanonCmd::StartSpeedFeedSync { .. }
+        | CanonCmd::StopSpeedFeedSync
+        | CanonCmd::SetSpindleSpeed { .. }
+        | CanonCmd::StartSpindleClockwise { .. }
+        | CanonCmd::StartSpindleCounterclockwise { .. }
+        | CanonCmd::StopSpindleTurning { .. }
+        | CanonCmd::SetSpindleMode { .. }
+        | CanonCmd::OrientSpindle { .. }
+        | CanonCmd::SelectTool { .. }
+        | CanonCmd::StartChange
+        | CanonCmd::ChangeTool { .. }
+        | CanonCmd::ChangeToolNumber { .. }
+        | CanonCmd::SetToolTableEntry { .. }
+        | CanonCmd::MistOn
+        | CanonCmd::MistOff
+        | CanonCmd::FloodOn
+        | CanonCmd::FloodOff
+        | CanonCmd::EnableFeedOverride
+        | CanonCmd::DisableFeedOverride
+        | CanonCmd::EnableSpeedOverride { .. }
+        | CanonCmd::DisableSpeedOverride { .. }
+        | CanonCmd::EnableAdaptiveFeed
+        | CanonCmd::DisableAdaptiveFeed
+        | CanonCmd::EnableFeedHold
+        | CanonCmd::DisableFeedHold
+        | CanonCmd::SetMotionOutputBit { .. }
+        | CanonCmd::ClearMotionOutputBit { .. }
+        | CanonCmd::SetMotionOutputValue { .. }
+        | CanonCmd::SetAuxOutputBit { .. }
+        | CanonCmd::ClearAuxOutputBit { .. }
+        | CanonCmd::SetAuxOutputValue { .. }
+        | CanonCmd::UserMCode { .. }
+        | CanonCmd::Comment(_)
+        | CanonCmd::Finish
+        | CanonCmd::ProgramEnd => false,
+    }
+}
+
+/// Plan `canons` from `start` against the machine's limits without moving.
+fn check_canons(shared: &Shared, canons: &[Canon], start: Position) -> Result<(), Refusal> {
+    let mut planner = Planner::new(&*shared.kins, start, shared.planner);
+    for c in canons {
         planner
-            .plan(&canon)
+            .plan(c)
             .map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
         while planner.next_segment().is_some() {}
     }
-    let file = std::fs::File::open(path).map_err(io_err)?;
-    let mut lines = 0u32;
-    for line in std::io::BufReader::new(file).split(b'\n') {
-        line.map_err(io_err)?;
-        lines += 1;
-    }
-    Ok(lines)
+    Ok(())
 }
 
-/// Interpret and plan just ahead of the servo, feeding its queue.
-fn stream_program(
-    shared: Arc<Shared>,
-    mut producer: rtrb::Producer<Segment>,
-    id: u32,
+/// Interpret and plan a whole program file from `from_line` without moving;
+/// returns its line count.
+async fn check_file(
+    shared: &Arc<Shared>,
     path: &Path,
     start: Position,
-) {
-    let mut failure = None;
-    let mut end = start;
-    let mut last_line = 0;
-    match Interpreter::open(path, start) {
-        Err(e) => failure = Some(format!("cannot read {}: {e}", path.display())),
-        Ok(interp) => {
-            let mut planner = Planner::new(&*shared.kins, start, shared.planner);
-            'program: for canon in interp {
-                let planned = canon.map_err(|e| e.to_string()).and_then(|c| {
-                    last_line = c.source.line;
-                    planner.plan(&c).map_err(|e| e.to_string())
-                });
-                if let Err(e) = planned {
-                    failure = Some(format!("{e} (the file changed after it was checked?)"));
-                    break;
+    from_line: u32,
+) -> Result<u32, Refusal> {
+    let kins = shared.kins.clone();
+    let config = shared.planner;
+    let path = path.to_path_buf();
+    blocking(move || {
+        let io_err = |e: std::io::Error| {
+            (
+                ErrorCode::IoError,
+                format!("cannot read {}: {e}", path.display()),
+            )
+        };
+        let interp = Interpreter::open(&path, start).map_err(io_err)?;
+        let mut planner = Planner::new(&*kins, start, config);
+        for canon in interp {
+            let canon = canon.map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+            if canon.source.line < from_line {
+                if canon.cmd == CanonCmd::ProgramEnd {
+                    return Err(invalid(format!(
+                        "cannot start at line {from_line}: the program ends on line {}",
+                        canon.source.line
+                    )));
                 }
-                while let Some(segment) = planner.next_segment() {
-                    if let Err(e) = push(&shared, &mut producer, segment) {
-                        failure = Some(e);
-                        break 'program;
-                    }
+                if skipped_before_start(&canon.cmd) {
+                    continue;
                 }
             }
-            planner.finish();
-            end = planner.position();
-            while failure.is_none() {
-                let Some(segment) = planner.next_segment() else {
-                    break;
-                };
-                failure = push(&shared, &mut producer, segment).err();
+            planner
+                .plan(&canon)
+                .map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+            while planner.next_segment().is_some() {}
+        }
+        let text = std::fs::read(&path).map_err(io_err)?;
+        let lines = text.split(|b| *b == b'\n').count() as u32 - u32::from(text.ends_with(b"\n"));
+        Ok(lines)
+    })
+    .await
+}
+
+/// What a planner thread streams.
+struct Stream {
+    tag: u32,
+    source: JobSource,
+    start: Position,
+    from_line: u32,
+    config: PlannerConfig,
+    cancel: Arc<AtomicBool>,
+}
+
+/// The planner thread of one job: interpret (for files) and plan just
+/// ahead of the servo, feeding its queue, then the job's `Stop` marker.
+fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
+    let Stream {
+        tag,
+        source,
+        start,
+        from_line,
+        config,
+        cancel,
+    } = job;
+    let mut failure = None;
+    let mut last_line = 0;
+    let mut planner = Planner::new(&*shared.kins, start, config);
+    let canons: Box<dyn Iterator<Item = Result<Canon, String>>> = match source {
+        JobSource::Canons(c) => Box::new(c.into_iter().map(Ok)),
+        JobSource::File(path) => match Interpreter::open(&path, start) {
+            Ok(i) => Box::new(i.map(|r| r.map_err(|e| e.to_string()))),
+            Err(e) => {
+                failure = Some(format!("cannot read {}: {e}", path.display()));
+                Box::new(std::iter::empty())
+            }
+        },
+    };
+    'program: for canon in canons {
+        if cancel.load(Ordering::Relaxed) {
+            break;
+        }
+        let c = match canon {
+            Ok(c) => c,
+            Err(e) => {
+                failure = Some(format!("{e} (the file changed after it was checked?)"));
+                break;
+            }
+        };
+        if c.source.line < from_line && skipped_before_start(&c.cmd) {
+            continue;
+        }
+        last_line = c.source.line;
+        if let CanonCmd::Message(text) = &c.cmd {
+            let mut control = shared.control.lock().expect("control lock poisoned");
+            control.queue_message(tag, feed.pushed, c.source.line, text.trim().to_string());
+        }
+        if let Err(e) = planner.plan(&c) {
+            failure = Some(format!("{e} (the file changed after it was checked?)"));
+            break;
+        }
+        while let Some(segment) = planner.next_segment() {
+            if !push(&mut feed, segment, Some(&cancel)) {
+                break 'program;
             }
         }
     }
-    // The end marker follows even a failure, so the servo stops there.
-    let marker = Segment::marker(SegmentKind::Stop { tag: id }, last_line, end);
-    let marker_failure = push(&shared, &mut producer, marker).err();
-    let mut programs = shared.programs.lock().expect("program lock poisoned");
-    if let (Some(reason), Some(p)) = (failure.or(marker_failure), programs.current.as_mut()) {
-        tracing::warn!(program = id, %reason, "program failed");
-        p.error = Some(reason);
+    if failure.is_none() && !cancel.load(Ordering::Relaxed) {
+        planner.finish();
+        while let Some(segment) = planner.next_segment() {
+            if !push(&mut feed, segment, Some(&cancel)) {
+                break;
+            }
+        }
     }
-    programs.producer = Some(producer);
+    // The marker follows even a failure or a cancel, so the servo stops
+    // there (or, aborting, knows where the job's segments end).
+    let marker = Segment::marker(SegmentKind::Stop { tag }, last_line, planner.position());
+    push(&mut feed, marker, None);
+    if let Some(reason) = failure {
+        tracing::warn!(job = tag, %reason, "job failed");
+        shared
+            .control
+            .lock()
+            .expect("control lock poisoned")
+            .job_failed(tag, reason);
+    }
+    return_feed(&shared, feed);
 }
 
-/// Push onto the servo queue, waiting while it is full. Gives up if the
-/// servo faults, since a faulted servo takes nothing more.
-fn push(
-    shared: &Shared,
-    producer: &mut rtrb::Producer<Segment>,
-    mut item: Segment,
-) -> Result<(), String> {
+/// Push onto the servo queue, waiting while it is full; gives up (false)
+/// when `cancel` is set. The servo always makes room eventually: it runs
+/// the queue, discards it while aborting, or drains it with the drives off.
+fn push(feed: &mut Feed, mut item: Segment, cancel: Option<&AtomicBool>) -> bool {
     loop {
-        match producer.push(item) {
-            Ok(()) => return Ok(()),
+        match feed.producer.push(item) {
+            Ok(()) => {
+                feed.pushed += 1;
+                return true;
+            }
             Err(rtrb::PushError::Full(back)) => {
                 item = back;
-                if let Some(fault) = shared.status.read().fault {
-                    return Err(format!("stopped by fault: {fault}"));
+                if cancel.is_some_and(|c| c.load(Ordering::Relaxed)) {
+                    return false;
                 }
                 // The queue holds seconds of motion; polling at 1 ms keeps it full.
                 std::thread::sleep(Duration::from_millis(1));
             }
         }
     }
+}
+
+/// Values in [`Axis::ALL`] order as `{"x": .., ...}` for this machine's axes.
+fn axes_json(shared: &Shared, v: &[f64; 9]) -> Value {
+    Value::Object(shared.axes_map(&Position::from_array(*v)))
+}
+
+fn offsets_json(shared: &Shared, p: &Parameters) -> Value {
+    let axes = |v: &[f64; 9]| axes_json(shared, v);
+    let mut systems = Map::new();
+    for (name, v) in COORDINATE_SYSTEMS.iter().zip(&p.work_offsets) {
+        systems.insert((*name).into(), axes(v));
+    }
+    json!({
+        "active": COORDINATE_SYSTEMS[p.active_system],
+        "systems": systems,
+        "g92": axes(&p.g92),
+        "g92_active": p.g92_active,
+        "g28": axes(&p.g28),
+        "g30": axes(&p.g30),
+    })
+}
+
+fn tool_json(shared: &Shared, t: &Tool) -> Value {
+    json!({
+        "tool": t.number,
+        "pocket": t.pocket,
+        "offsets": axes_json(shared, &t.offsets),
+        "diameter": t.diameter,
+        "comment": t.comment,
+    })
+}
+
+/// `{"x": 1.0, ...}` to (axis, value) pairs of this machine's axes.
+fn axis_values(shared: &Shared, values: &Map<String, Value>) -> Result<Vec<(Axis, f64)>, Refusal> {
+    if values.is_empty() {
+        return Err(invalid("no axis values given, e.g. {\"x\": 10.0}"));
+    }
+    values
+        .iter()
+        .map(|(k, v)| {
+            let axis = shared.axis(k)?;
+            let v = v
+                .as_f64()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| invalid(format!("{k}: {v} is not a number")))?;
+            Ok((axis, v))
+        })
+        .collect()
+}
+
+async fn set_offset(
+    shared: &Arc<Shared>,
+    system: &str,
+    values: &Map<String, Value>,
+) -> Result<Value, Refusal> {
+    let name = system.to_ascii_uppercase();
+    let values = axis_values(shared, values)?;
+    enum Slot {
+        Work(usize),
+        G92,
+        G28,
+        G30,
+    }
+    let slot = match name.as_str() {
+        "G92" => Slot::G92,
+        "G28" => Slot::G28,
+        "G30" => Slot::G30,
+        n => Slot::Work(
+            COORDINATE_SYSTEMS
+                .iter()
+                .position(|s| *s == n)
+                .ok_or_else(|| {
+                    invalid(format!(
+                        "no offset {system:?}: use G54 … G59.3, G92, G28 or G30"
+                    ))
+                })?,
+        ),
+    };
+    let shared2 = shared.clone();
+    blocking(move || {
+        let mut store = shared2.store.lock().expect("store lock poisoned");
+        let mut p = store.parameters().clone();
+        let target = match slot {
+            Slot::Work(k) => &mut p.work_offsets[k],
+            Slot::G92 => &mut p.g92,
+            Slot::G28 => &mut p.g28,
+            Slot::G30 => &mut p.g30,
+        };
+        for (axis, v) in values {
+            target[axis.index()] = v;
+        }
+        store.set_parameters(p).map_err(io_refusal)?;
+        Ok(offsets_json(&shared2, store.parameters()))
+    })
+    .await
 }

@@ -10,26 +10,171 @@ use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
 /// Protocol version, reported by `hello`.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Longest request line accepted, bytes.
 pub const MAX_LINE: usize = 1 << 20;
 
-/// A request's command and its arguments.
+/// A joint named by its number (from 0) or by its name in the machine
+/// description.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum JointRef {
+    Index(usize),
+    Name(String),
+}
+
+/// What a status subscription sends each period.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Fields {
+    /// The whole status every time (`status` events).
+    #[default]
+    Full,
+    /// Only the top-level status fields that changed since the last event
+    /// (`changes` events); the first event carries every field.
+    Changed,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A request's command and its arguments. Units: mm (degrees for rotary
+/// axes), mm/min for speeds, percent for overrides.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Command {
     /// Protocol version and machine name.
     Hello,
+    /// Present the bearer token (TCP connections when a token is configured).
+    Auth { token: String },
     /// One status snapshot.
     Status,
-    /// Check a program file, then run it. `path` must be absolute.
-    Run { path: String },
-    /// Send `status` events at `rate_hz` (1–1000) until `unsubscribe`.
-    Subscribe { rate_hz: f64 },
-    /// Stop status events.
+    /// Send `status` (or `changes`) events at `rate_hz` (1–1000; none when
+    /// absent), and machine events when `events` (default true), until
+    /// `unsubscribe`. A new subscription replaces the old one.
+    Subscribe {
+        #[serde(default)]
+        rate_hz: Option<f64>,
+        #[serde(default)]
+        fields: Fields,
+        #[serde(default = "yes")]
+        events: bool,
+    },
+    /// Stop all events to this client.
     Unsubscribe,
+    /// Emergency stop: drives off at once, motion and programs abandoned.
+    Estop,
+    /// Leave e-stop (to `estop_reset`), or clear a fault (to `estop_reset`).
+    Reset,
+    /// Drives on (from `estop_reset`).
+    On,
+    /// Drives off (to `estop_reset`); refused while the machine moves.
+    Off,
+    /// Home every joint, or one joint.
+    Home {
+        #[serde(default)]
+        joint: Option<JointRef>,
+    },
+    /// Jog an axis (or a joint) in `direction` (1 or -1) at `speed` mm/min:
+    /// `distance` mm and stop (incremental), or until `jog_stop`
+    /// (continuous, also stopped if this client disconnects).
+    Jog {
+        #[serde(default)]
+        axis: Option<String>,
+        #[serde(default)]
+        joint: Option<JointRef>,
+        direction: i32,
+        speed: f64,
+        #[serde(default)]
+        distance: Option<f64>,
+    },
+    /// Stop a jog, decelerating.
+    JogStop,
+    /// Execute one line of G-code.
+    Mdi { line: String },
+    /// Check a program file and make it the program `run` runs.
+    Open { path: String },
+    /// Run a program: `path` (opened first), or the opened one; from source
+    /// line `line` (default 1).
+    Run {
+        #[serde(default)]
+        path: Option<String>,
+        #[serde(default)]
+        line: Option<u32>,
+    },
+    /// Feed hold: decelerate on the path and wait.
+    Pause,
+    /// Release feed hold and single-block stepping.
+    Resume,
+    /// Single-block: run the next source line, then wait. From `idle`, starts
+    /// the opened program that way.
+    Step,
+    /// Stop the program, MDI, jog or homing, decelerating on the path.
+    Abort,
+    /// Set the feed (0–200) and/or rapid (0–100) override, percent.
+    Override {
+        #[serde(default)]
+        feed: Option<f64>,
+        #[serde(default)]
+        rapid: Option<f64>,
+    },
+    /// Read the work offsets, G92 offset and G28/G30 positions.
+    Offsets,
+    /// Set some axes of one offset or stored position: `system` is G54 …
+    /// G59.3, G92, G28 or G30; `values` maps axis letters to mm.
+    SetOffset {
+        system: String,
+        values: Map<String, Value>,
+    },
+    /// Read the tool table.
+    Tools,
+    /// Add or change a tool; absent fields keep their value (a new tool
+    /// starts from zeros, pocket = tool number).
+    SetTool {
+        tool: u32,
+        #[serde(default)]
+        pocket: Option<u32>,
+        #[serde(default)]
+        offsets: Option<Map<String, Value>>,
+        #[serde(default)]
+        diameter: Option<f64>,
+        #[serde(default)]
+        comment: Option<String>,
+    },
+    /// Remove a tool from the table.
+    RemoveTool { tool: u32 },
 }
+
+/// Every command name, as sent in `cmd`.
+pub const COMMANDS: [&str; 25] = [
+    "hello",
+    "auth",
+    "status",
+    "subscribe",
+    "unsubscribe",
+    "estop",
+    "reset",
+    "on",
+    "off",
+    "home",
+    "jog",
+    "jog_stop",
+    "mdi",
+    "open",
+    "run",
+    "pause",
+    "resume",
+    "step",
+    "abort",
+    "override",
+    "offsets",
+    "set_offset",
+    "tools",
+    "set_tool",
+    "remove_tool",
+];
 
 /// Error codes carried in error replies.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
@@ -43,13 +188,18 @@ pub enum ErrorCode {
     UnknownCommand,
     /// The request line exceeds [`MAX_LINE`].
     LineTooLong,
-    /// The machine is busy (a program is running).
+    /// The connection must present the bearer token first (`auth`).
+    Unauthorized,
+    /// The machine is busy (a program, MDI, jog or homing is running).
     Busy,
+    /// The command is not allowed in the machine's state; the message says
+    /// why and what to do.
+    InvalidState,
     /// The machine is in a fault state.
     Fault,
     /// The program was refused: the message says where and why.
     ProgramError,
-    /// A file could not be read.
+    /// A file could not be read or written.
     IoError,
     /// An argument is out of range.
     InvalidArgument,
@@ -73,44 +223,128 @@ pub enum ServerLine {
 }
 
 /// An unsolicited message.
+#[allow(clippy::large_enum_variant)] // status is the common event
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
+    /// A full status snapshot (subscription with `fields: full`).
     Status { status: Status },
+    /// The status fields that changed (subscription with `fields: changed`).
+    Changes { changes: Map<String, Value> },
+    /// The machine state (or how a program executes) changed, and why.
+    State {
+        state: MachineState,
+        /// In `auto` and `mdi`: running, paused or stepping.
+        execution: Option<Execution>,
+        previous: MachineState,
+        reason: Option<String>,
+    },
+    /// A program started, moved to another line, or ended.
+    Program { program: ProgramStatus },
+    /// An operator message from the program, `(MSG, text)`, shown when the
+    /// machine reaches it.
+    Message { text: String, line: u32 },
+    /// Something went wrong outside any request, e.g. a program failed.
+    Error { message: String },
+    /// This client read too slowly and `missed` events were dropped.
+    Lagged { missed: u64 },
 }
 
 /// The machine's overall state.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum MachineState {
-    /// Ready for a program.
+    /// Emergency stop: drives off; `reset` to leave.
+    Estop,
+    /// E-stop released, drives off; `on` to power up.
+    EstopReset,
+    /// Drives on, not every joint homed; `home`.
+    On,
+    /// Homing.
+    Homing,
+    /// On, homed and ready.
     Idle,
-    /// A program is running.
-    Running,
-    /// Motion stopped by a fault; see `fault`.
+    /// A program runs (see `execution`).
+    Auto,
+    /// An MDI line runs.
+    Mdi,
+    /// Jogging.
+    Manual,
+    /// Motion stopped by a fault; see `fault`. `reset` to clear.
     Fault,
+}
+
+/// How a program or MDI line is executing.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Execution {
+    Running,
+    /// Feed hold.
+    Paused,
+    /// Single-block mode.
+    Stepping,
 }
 
 /// How a program stands.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum ProgramState {
+    /// Opened and checked, not run yet.
+    Ready,
     Running,
     Finished,
     Failed,
+    Aborted,
 }
 
 /// The current or last program.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub struct ProgramStatus {
-    /// Id returned by `run`, increasing from 1.
+    /// Id of this run (increasing, shared with MDI, jogs and homing); 0
+    /// while the program is only opened.
     pub id: u32,
     pub file: String,
     pub state: ProgramState,
     /// Number of lines in the file.
     pub lines: u32,
+    /// Line the run started from.
+    pub start_line: u32,
+    /// Source line reached (0 before the first).
+    pub line: u32,
     /// Why it failed, when it did.
     pub error: Option<String>,
+}
+
+/// What a job moves for.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum JobType {
+    Program,
+    Mdi,
+    Jog,
+    Home,
+}
+
+/// The current or last job: a program run, MDI line, jog or homing.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+pub struct JobStatus {
+    /// The id its command returned.
+    pub id: u32,
+    /// What the job moves for.
+    pub kind: JobType,
+    /// `running`, then `finished`, `failed` or `aborted`.
+    pub state: ProgramState,
+    /// Why it failed or was aborted.
+    pub error: Option<String>,
+}
+
+/// Override factors in force, percent.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+pub struct Overrides {
+    /// Feed override, 0 to 200.
+    pub feed: f64,
+    /// Rapid override, 0 to 100.
+    pub rapid: f64,
 }
 
 /// Servo thread figures.
@@ -118,7 +352,13 @@ pub struct ProgramStatus {
 pub struct ServoStatus {
     pub period_us: u32,
     pub ticks: u64,
+    /// Wake-ups a whole period or more late.
     pub overruns: u64,
+    /// Latest wake-up after the deadline, µs.
+    pub latency_max_us: f64,
+    /// Wake-ups by lateness: `[bound_us, count]` pairs, the last bound
+    /// `null` (everything later).
+    pub latency_histogram: Vec<(Option<f64>, u64)>,
 }
 
 /// A status snapshot.
@@ -126,14 +366,28 @@ pub struct ServoStatus {
 pub struct Status {
     /// Machine name, e.g. `mill3`.
     pub machine: String,
+    /// The machine state (see `docs/protocol.md`).
     pub state: MachineState,
+    /// In `auto` and `mdi`: running, paused or stepping.
+    pub execution: Option<Execution>,
+    /// Per joint, in joint order: homed.
+    pub homed: Vec<bool>,
     /// Source line being executed (0 before any).
     pub line: u32,
     /// Tool position in machine coordinates, mm (degrees for A B C), keyed
     /// by lower-case axis letter in axis order: `{"x": .., "y": .., "z": ..}`.
     pub position: Map<String, Value>,
+    /// Commanded tool position, same keys.
+    pub commanded: Map<String, Value>,
     /// Joint positions in joint order, joint units (mm).
     pub joints: Vec<f64>,
+    /// Path speed, mm/min.
+    pub velocity: f64,
+    /// Overrides in force, percent.
+    pub overrides: Overrides,
+    /// The current or last job.
+    pub job: Option<JobStatus>,
+    /// The opened, running or last program.
     pub program: Option<ProgramStatus>,
     /// Why motion stopped, in fault state.
     pub fault: Option<String>,
@@ -196,12 +450,11 @@ pub fn parse_request(line: &[u8]) -> Result<(Value, Command), ServerLine> {
             ));
         }
     };
-    const KNOWN: [&str; 5] = ["hello", "status", "run", "subscribe", "unsubscribe"];
-    if !KNOWN.contains(&cmd.as_str()) {
+    if !COMMANDS.contains(&cmd.as_str()) {
         return Err(ServerLine::error(
             id,
             ErrorCode::UnknownCommand,
-            format!("unknown command {cmd:?}; known: {}", KNOWN.join(", ")),
+            format!("unknown command {cmd:?}; known: {}", COMMANDS.join(", ")),
         ));
     }
     let command = match serde_json::from_value::<Command>(Value::Object(object.clone())) {
@@ -246,7 +499,17 @@ mod tests {
         assert_eq!(
             c,
             Command::Run {
-                path: "/p.ngc".into()
+                path: Some("/p.ngc".into()),
+                line: None
+            }
+        );
+        let (_, c) = parse_request(br#"{"id": 1, "cmd": "subscribe", "rate_hz": 5}"#).unwrap();
+        assert_eq!(
+            c,
+            Command::Subscribe {
+                rate_hz: Some(5.0),
+                fields: Fields::Full,
+                events: true
             }
         );
         let (id, c) = parse_request(br#"{"cmd":"status","id":3}"#).unwrap();
@@ -272,8 +535,14 @@ mod tests {
             (json!(2), ErrorCode::UnknownCommand)
         );
         assert_eq!(
-            code(parse_request(br#"{"id":3,"cmd":"run"}"#)),
+            code(parse_request(br#"{"id":3,"cmd":"mdi"}"#)),
             (json!(3), ErrorCode::InvalidRequest)
+        );
+        assert_eq!(
+            code(parse_request(
+                br#"{"id":6,"cmd":"jog","axis":"x","direction":"up","speed":1}"#
+            )),
+            (json!(6), ErrorCode::InvalidRequest)
         );
         assert_eq!(
             code(parse_request(br#"{"id":4,"cmd":"status","extra":1}"#)),

@@ -36,7 +36,15 @@ pub enum ServoCommand {
     Step,
     /// Stop on the path, then discard the queue up to the `Stop` marker
     /// tagged `program`, which the planner sends when it has stopped.
+    /// Ignored if that marker has already been reached or discarded.
     Abort { program: u32 },
+    /// Drives on or off. Off stops motion at once (no deceleration: this is
+    /// the e-stop path) and discards everything queued from then on until
+    /// the drives are on again; on restarts the executor from the measured
+    /// pose, so nothing jumps. Refused (stays off) while a fault is latched.
+    Enable(bool),
+    /// Forget a latched fault. The drives stay off until `Enable(true)`.
+    ClearFault,
 }
 
 /// Why the servo stopped motion. `Copy`, so it fits in the snapshot.
@@ -46,7 +54,46 @@ pub enum ServoFault {
     Hal(HalFault),
     #[error("kinematics: {0}")]
     Kinematics(KinematicsError),
+    /// A joint lagged (or led) its command by more than its limit, mm.
+    #[error("joint {joint} following error {error:.4} exceeds its limit {limit:.4}")]
+    FollowingError {
+        joint: usize,
+        error: f64,
+        limit: f64,
+    },
 }
+
+impl ServoFault {
+    /// The fault as the operator should read it, naming joints by their
+    /// names on `kins`.
+    pub fn describe(&self, kins: &dyn Kinematics) -> String {
+        let name = |j: usize| {
+            kins.joints()
+                .get(j)
+                .map(|s| s.name.clone())
+                .unwrap_or_else(|| j.to_string())
+        };
+        match *self {
+            ServoFault::Hal(e) => format!("hardware: {e}"),
+            ServoFault::Kinematics(e) => format!("kinematics: {}", e.describe(kins)),
+            ServoFault::FollowingError {
+                joint,
+                error,
+                limit,
+            } => format!(
+                "following error: joint {} is {:.4} from its command, more than its limit {:.4}",
+                name(joint),
+                error.abs(),
+                limit
+            ),
+        }
+    }
+}
+
+/// Upper bounds of the wake-up latency histogram buckets, ns; the last
+/// bucket counts everything later than the last bound.
+pub const LATENCY_BOUNDS_NS: [u64; 7] =
+    [10_000, 20_000, 50_000, 100_000, 200_000, 500_000, 1_000_000];
 
 /// What the servo thread publishes every tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -77,8 +124,20 @@ pub struct Snapshot {
     /// Joint feedback positions; the first `joint_count` are used.
     pub joints: [f64; MAX_JOINTS],
     pub joint_count: usize,
-    /// Set when motion was stopped by a fault; latched.
+    /// Set when motion was stopped by a fault; latched until `ClearFault`.
     pub fault: Option<ServoFault>,
+    /// The drives are enabled (and no fault is latched).
+    pub enabled: bool,
+    /// Single-block mode is on.
+    pub single_block: bool,
+    /// Queue items taken off the queue since start, run or discarded; the
+    /// producer counts what it pushes, so it can tell when an item is done.
+    pub consumed: u64,
+    /// Latest wake-up of the servo thread after its deadline, ns.
+    pub latency_max_ns: u64,
+    /// Wake-ups by lateness: bucket `i` counts those up to
+    /// [`LATENCY_BOUNDS_NS`]`[i]`, the last bucket the rest.
+    pub latency_histogram: [u64; LATENCY_BOUNDS_NS.len() + 1],
 }
 
 impl Snapshot {
@@ -102,6 +161,11 @@ impl Snapshot {
             joints: j,
             joint_count: joints.len(),
             fault: None,
+            enabled: false,
+            single_block: false,
+            consumed: 0,
+            latency_max_ns: 0,
+            latency_histogram: [0; LATENCY_BOUNDS_NS.len() + 1],
         }
     }
 }
@@ -123,6 +187,10 @@ pub struct ServoTick {
     commands: rtrb::Consumer<ServoCommand>,
     /// Aborting this program: stop, then flush to its marker.
     aborting: Option<u32>,
+    /// Drives commanded on (cleared by a fault).
+    enabled: bool,
+    /// Largest |command − feedback| per joint before a fault, mm (infinite: unchecked).
+    following_limits: [f64; MAX_JOINTS],
     setpoints: Setpoints,
     feedback: Feedback,
     snapshot: Snapshot,
@@ -130,7 +198,8 @@ pub struct ServoTick {
 }
 
 impl ServoTick {
-    /// A tick of `period` seconds for a machine resting at `start`.
+    /// A tick of `period` seconds for a machine resting at `start`, with
+    /// its drives off until [`ServoCommand::Enable`].
     pub fn new(
         period: f64,
         start: Position,
@@ -146,7 +215,6 @@ impl ServoTick {
         for (cmd, q) in setpoints.joints.iter_mut().zip(&joints[..n]) {
             cmd.position = *q;
         }
-        setpoints.enable = true;
         Ok(ServoTick {
             period,
             executor: Executor::new(start),
@@ -155,6 +223,8 @@ impl ServoTick {
             queue,
             commands,
             aborting: None,
+            enabled: false,
+            following_limits: [f64::INFINITY; MAX_JOINTS],
             setpoints,
             feedback: Feedback::default(),
             snapshot: Snapshot::at_rest(start, &joints[..n]),
@@ -181,67 +251,95 @@ impl ServoTick {
         &self.snapshot
     }
 
-    /// Run one servo period.
-    pub fn tick(&mut self) -> &Snapshot {
-        while let Ok(cmd) = self.commands.pop() {
-            match cmd {
-                ServoCommand::FeedOverride(f) => self.executor.set_feed_override(f),
-                ServoCommand::RapidOverride(f) => self.executor.set_rapid_override(f),
-                ServoCommand::Hold(on) => self.executor.set_hold(on),
-                ServoCommand::SingleBlock(on) => self.executor.set_single_block(on),
-                ServoCommand::Step => self.executor.step(),
-                ServoCommand::Abort { program } => {
+    /// Fault when a joint's feedback is further than `limits[j]` (mm) from
+    /// its command; `None` (or a missing entry) leaves the joint unchecked.
+    pub fn set_following_error_limits(&mut self, limits: &[Option<f64>]) {
+        for (slot, limit) in self.following_limits.iter_mut().zip(limits) {
+            *slot = limit.unwrap_or(f64::INFINITY);
+        }
+    }
+
+    fn command(&mut self, cmd: ServoCommand) {
+        match cmd {
+            ServoCommand::FeedOverride(f) => self.executor.set_feed_override(f),
+            ServoCommand::RapidOverride(f) => self.executor.set_rapid_override(f),
+            ServoCommand::Hold(on) => self.executor.set_hold(on),
+            ServoCommand::SingleBlock(on) => {
+                self.executor.set_single_block(on);
+                self.snapshot.single_block = on;
+            }
+            ServoCommand::Step => self.executor.step(),
+            ServoCommand::Abort { program } => {
+                let snap = &self.snapshot;
+                if program > snap.program_done.max(snap.program_aborted) {
                     self.aborting = Some(program);
                     self.executor.set_hold(true);
                 }
             }
-        }
-        let snap = &mut self.snapshot;
-        snap.ticks += 1;
-        let n = snap.joint_count;
-        if let (Some(program), true) = (self.aborting, self.executor.velocity() == 0.0) {
-            // At rest: drop what is queued up to the planner's final marker.
-            while let Ok(seg) = self.queue.pop() {
-                if seg.kind == (SegmentKind::Stop { tag: program }) {
-                    self.aborting = None;
-                    snap.program_aborted = program;
-                    self.executor.reset_queue();
-                    self.executor.set_hold(false);
-                    break;
-                }
-            }
-        }
-        if snap.fault.is_none() && self.aborting.is_none_or(|_| self.executor.velocity() > 0.0) {
-            let chunk = self
-                .queue
-                .read_chunk(self.queue.slots())
-                .expect("slots() items are readable");
-            let (head, tail) = chunk.as_slices();
-            let sample = self.executor.tick(self.period, head, tail);
-            chunk.commit(sample.consumed);
-            if let Some(tag) = sample.stopped_at {
-                snap.program_done = tag;
-            }
-            snap.moving = sample.moving;
-            snap.line = sample.line;
-            snap.velocity = sample.velocity;
-            let mut q = [0.0; MAX_JOINTS];
-            match self.kins.inverse(&sample.position, &mut q[..n]) {
-                Ok(()) => {
-                    snap.commanded = sample.position;
-                    for (cmd, &target) in self.setpoints.joints.iter_mut().zip(&q[..n]) {
-                        cmd.velocity = (target - cmd.position) / self.period;
-                        cmd.position = target;
+            ServoCommand::Enable(true) if self.snapshot.fault.is_some() => {}
+            ServoCommand::Enable(true) => {
+                if !self.enabled {
+                    // Start over from where the machine really is; the
+                    // overrides survive, like on a real control panel.
+                    let snap = &mut self.snapshot;
+                    let (feed, rapid) = (
+                        self.executor.feed_override(),
+                        self.executor.rapid_override(),
+                    );
+                    self.executor = Executor::new(snap.position);
+                    self.executor.set_feed_override(feed);
+                    self.executor.set_rapid_override(rapid);
+                    snap.single_block = false;
+                    snap.commanded = snap.position;
+                    for (cmd, &q) in self.setpoints.joints.iter_mut().zip(&snap.joints) {
+                        cmd.position = q;
+                        cmd.velocity = 0.0;
                     }
                 }
-                Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
+                self.enabled = true;
+            }
+            ServoCommand::Enable(false) => self.enabled = false,
+            ServoCommand::ClearFault => self.snapshot.fault = None,
+        }
+    }
+
+    /// Take everything off the queue without running it (drives off or
+    /// faulted); `Stop` markers taken this way count as aborted.
+    fn discard_queue(&mut self) {
+        let snap = &mut self.snapshot;
+        while let Ok(seg) = self.queue.pop() {
+            snap.consumed += 1;
+            if let SegmentKind::Stop { tag } = seg.kind {
+                snap.program_aborted = tag;
+                if self.aborting.is_some_and(|a| a <= tag) {
+                    self.aborting = None;
+                }
             }
         }
+    }
+
+    /// Run one servo period.
+    pub fn tick(&mut self) -> &Snapshot {
+        while let Ok(cmd) = self.commands.pop() {
+            self.command(cmd);
+        }
+        self.snapshot.ticks += 1;
+        let n = self.snapshot.joint_count;
+        let active = self.enabled && self.snapshot.fault.is_none();
+        if !active {
+            self.discard_queue();
+            let snap = &mut self.snapshot;
+            snap.moving = false;
+            snap.velocity = 0.0;
+        } else {
+            self.run_executor(n);
+        }
+        let snap = &mut self.snapshot;
         snap.hold = self.executor.is_held();
         snap.feed_override = self.executor.feed_override();
         snap.rapid_override = self.executor.rapid_override();
-        // A fault disables the drives: they hold where they are.
-        self.setpoints.enable = snap.fault.is_none();
+        // A fault or e-stop disables the drives: they hold where they are.
+        self.setpoints.enable = active && snap.fault.is_none();
         if let Err(e) = self
             .hal
             .exchange(self.period, &self.setpoints, &mut self.feedback)
@@ -251,15 +349,38 @@ impl ServoTick {
         for i in 0..n {
             snap.joints[i] = self.feedback.joints[i].position;
         }
+        if self.setpoints.enable && snap.fault.is_none() {
+            for i in 0..n {
+                let error = self.setpoints.joints[i].position - snap.joints[i];
+                if error.abs() > self.following_limits[i] {
+                    snap.fault = Some(ServoFault::FollowingError {
+                        joint: i,
+                        error,
+                        limit: self.following_limits[i],
+                    });
+                    break;
+                }
+            }
+        }
         match self.kins.forward(&snap.joints[..n], &snap.position) {
             Ok(p) => snap.position = p,
             Err(e) => {
                 snap.fault.get_or_insert(ServoFault::Kinematics(e));
             }
         }
+        if !self.setpoints.enable {
+            // Off: the command follows the machine, so turning on is smooth.
+            snap.commanded = snap.position;
+            for (cmd, &q) in self.setpoints.joints.iter_mut().zip(&snap.joints[..n]) {
+                cmd.position = q;
+                cmd.velocity = 0.0;
+            }
+        }
         if snap.fault.is_some() {
             snap.moving = false;
+            self.enabled = false;
         }
+        snap.enabled = self.enabled;
         if let Some(ex) = self.export.as_deref_mut() {
             let f = &mut ex.frame;
             f.tick = snap.ticks;
@@ -282,6 +403,55 @@ impl ServoTick {
         }
         &self.snapshot
     }
+
+    fn run_executor(&mut self, n: usize) {
+        let snap = &mut self.snapshot;
+        if let (Some(program), true) = (self.aborting, self.executor.velocity() == 0.0) {
+            // At rest: drop what is queued up to the planner's final marker.
+            while let Ok(seg) = self.queue.pop() {
+                snap.consumed += 1;
+                if seg.kind == (SegmentKind::Stop { tag: program }) {
+                    self.aborting = None;
+                    snap.program_aborted = program;
+                    self.executor.reset_queue();
+                    self.executor.set_hold(false);
+                    self.executor.set_single_block(false);
+                    snap.single_block = false;
+                    break;
+                }
+            }
+        }
+        if self.aborting.is_some() && self.executor.velocity() == 0.0 {
+            // Still waiting for the planner's marker: stay put.
+            snap.moving = false;
+            return;
+        }
+        let chunk = self
+            .queue
+            .read_chunk(self.queue.slots())
+            .expect("slots() items are readable");
+        let (head, tail) = chunk.as_slices();
+        let sample = self.executor.tick(self.period, head, tail);
+        chunk.commit(sample.consumed);
+        snap.consumed += sample.consumed as u64;
+        if let Some(tag) = sample.stopped_at {
+            snap.program_done = tag;
+        }
+        snap.moving = sample.moving;
+        snap.line = sample.line;
+        snap.velocity = sample.velocity;
+        let mut q = [0.0; MAX_JOINTS];
+        match self.kins.inverse(&sample.position, &mut q[..n]) {
+            Ok(()) => {
+                snap.commanded = sample.position;
+                for (cmd, &target) in self.setpoints.joints.iter_mut().zip(&q[..n]) {
+                    cmd.velocity = (target - cmd.position) / self.period;
+                    cmd.position = target;
+                }
+            }
+            Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
+        }
+    }
 }
 
 /// A running servo thread.
@@ -294,9 +464,17 @@ impl ServoThread {
     /// Start ticking `tick` every period on the wall clock (CLOCK_MONOTONIC,
     /// absolute deadlines, so sleep jitter does not accumulate), publishing
     /// each snapshot to `status`.
+    ///
+    /// With `priority` 1 to 99 the thread asks for `SCHED_FIFO` at that
+    /// priority first; where the OS refuses (no `CAP_SYS_NICE`, no
+    /// `LimitRTPRIO`), it says so in the log and runs at normal priority.
+    /// With `cpu`, it pins itself to that CPU (e.g. one isolated with
+    /// `isolcpus=`), or says in the log why it could not.
     pub fn spawn(
         mut tick: ServoTick,
         mut status: Writer<Snapshot>,
+        priority: u8,
+        cpu: Option<usize>,
     ) -> std::io::Result<ServoThread> {
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = stop.clone();
@@ -304,13 +482,39 @@ impl ServoThread {
         let handle = std::thread::Builder::new()
             .name("kerf-servo".into())
             .spawn(move || {
+                if priority > 0 {
+                    match make_realtime(priority) {
+                        Ok(()) => tracing::info!(priority, "servo thread runs SCHED_FIFO"),
+                        Err(e) => tracing::warn!(
+                            "servo thread runs without real-time priority ({e}): expect late \
+                             ticks under load; see docs/deploy.md"
+                        ),
+                    }
+                }
+                // Pinned after going real-time, so the move to the CPU
+                // itself happens at real-time priority.
+                if let Some(cpu) = cpu {
+                    match pin_to_cpu(cpu) {
+                        Ok(()) => tracing::info!(cpu, "servo thread pinned"),
+                        Err(e) => tracing::warn!(cpu, "cannot pin the servo thread: {e}"),
+                    }
+                }
                 let period_ns = period.as_nanos() as i64;
                 let mut deadline = now_ns();
                 let mut overruns = 0;
+                let mut latency_max = 0u64;
+                let mut histogram = [0u64; LATENCY_BOUNDS_NS.len() + 1];
                 while !stop_flag.load(Ordering::Relaxed) {
                     deadline += period_ns;
                     sleep_until_ns(deadline);
                     let late = now_ns() - deadline;
+                    let late_ns = late.max(0) as u64;
+                    latency_max = latency_max.max(late_ns);
+                    let bucket = LATENCY_BOUNDS_NS
+                        .iter()
+                        .position(|&b| late_ns <= b)
+                        .unwrap_or(LATENCY_BOUNDS_NS.len());
+                    histogram[bucket] += 1;
                     if late >= period_ns {
                         // Missed at least a whole period: count it and restart the
                         // schedule from now rather than running a burst of ticks.
@@ -320,6 +524,8 @@ impl ServoThread {
                     tick.tick();
                     let mut snap = *tick.snapshot();
                     snap.overruns = overruns;
+                    snap.latency_max_ns = latency_max;
+                    snap.latency_histogram = histogram;
                     status.write(&snap);
                 }
             })?;
@@ -341,6 +547,27 @@ impl ServoThread {
 impl Drop for ServoThread {
     fn drop(&mut self) {
         self.stop();
+    }
+}
+
+/// Run the calling thread on `cpu` only.
+fn pin_to_cpu(cpu: usize) -> nix::Result<()> {
+    let mut set = nix::sched::CpuSet::new();
+    set.set(cpu)?;
+    nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set)
+}
+
+/// Switch the calling thread to `SCHED_FIFO` at `priority`.
+fn make_realtime(priority: u8) -> std::io::Result<()> {
+    let param = libc::sched_param {
+        sched_priority: i32::from(priority),
+    };
+    // SAFETY: valid pointer to a sched_param for the calling thread.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::from_raw_os_error(rc))
     }
 }
 

@@ -10,8 +10,7 @@ mod support;
 
 use std::process::{Command, Output};
 
-use kerf::client::Client;
-use kerf::protocol::{Command as Request, Event, MachineState, ProgramState, Status};
+use kerf::protocol::{Command as Request, MachineState, ProgramState, Status};
 use serde_json::Value;
 use support::Kerfd;
 
@@ -218,7 +217,7 @@ fn axis(status: &Status, key: &str) -> f64 {
 #[test]
 fn kerfd_runs_a_program_on_the_crossed_o_x_glide() {
     let kerfd = Kerfd::start(&["--machine", "oxglide-x"]);
-    let mut client = Client::connect(&kerfd.socket).unwrap();
+    let mut client = kerfd.ready_client();
     let start: Status = serde_json::from_value(client.request(&Request::Status).unwrap()).unwrap();
     assert_eq!(start.machine, "oxglide-x");
     assert_eq!((axis(&start, "x"), axis(&start, "z")), (250.0, -300.0));
@@ -228,23 +227,12 @@ fn kerfd_runs_a_program_on_the_crossed_o_x_glide() {
     );
     let reply = client
         .request(&Request::Run {
-            path: program.display().to_string(),
+            path: Some(program.display().to_string()),
+            line: None,
         })
         .unwrap();
     let id = reply["program"].as_u64().unwrap() as u32;
-    client
-        .request(&Request::Subscribe { rate_hz: 50.0 })
-        .unwrap();
-    let end = loop {
-        let Event::Status { status } = client.next_event().unwrap();
-        if status
-            .program
-            .as_ref()
-            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
-        {
-            break status;
-        }
-    };
+    let end = client.wait_job(id, 50.0, |_| {}).unwrap();
     let p = end.program.as_ref().unwrap();
     assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);
     assert_eq!(end.state, MachineState::Idle);

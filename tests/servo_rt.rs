@@ -70,6 +70,8 @@ fn ticks_through_a_program_without_allocating() {
 
     let mut tick =
         ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
+    tick.set_following_error_limits(&[Some(0.1), Some(0.1), None]);
+    commands.push(ServoCommand::Enable(true)).unwrap();
     COUNTING.with(|c| c.set(true));
     let mut ticks = 0u64;
     while tick.snapshot().program_done != 1 && ticks < 1_000_000 {
@@ -152,4 +154,105 @@ fn kinematics_of_every_machine_run_without_allocating() {
             );
         }
     }
+}
+
+/// Plan `program` from the origin into a fresh queue, ending with a `Stop`
+/// marker tagged `tag`.
+fn queue_program(producer: &mut rtrb::Producer<Segment>, program: &str, tag: u32) -> Position {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let mut planner = Planner::new(
+        &*machine.kinematics,
+        Position::ZERO,
+        PlannerConfig::default(),
+    );
+    for canon in Interpreter::from_text(program, "rt.ngc", Position::ZERO) {
+        planner.plan(&canon.unwrap()).unwrap();
+        while let Some(seg) = planner.next_segment() {
+            producer.push(seg).unwrap();
+        }
+    }
+    planner.finish();
+    while let Some(seg) = planner.next_segment() {
+        producer.push(seg).unwrap();
+    }
+    let end = planner.position();
+    producer
+        .push(Segment::marker(SegmentKind::Stop { tag }, 0, end))
+        .unwrap();
+    end
+}
+
+#[test]
+fn faults_abort_and_estop_allocate_nothing_either() {
+    use kerf::servo::ServoFault;
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = machine.kinematics.clone();
+    // Joint x seizes at 20 mm; its following error limit is 0.5 mm.
+    let hal_config: kerf_io::HalConfig =
+        toml::from_str("backend = \"sim\"\n[sim.jam]\njoint = 0\nat = 20.0\n").unwrap();
+    let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
+    let (mut producer, consumer) = rtrb::RingBuffer::new(256);
+    let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
+    let mut tick =
+        ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
+    tick.set_following_error_limits(&[Some(0.5), None, None]);
+
+    queue_program(&mut producer, "G1 X50 F1200\nM2\n", 1);
+    queue_program(&mut producer, "G1 Y50 F1200\nM2\n", 2);
+    queue_program(&mut producer, "G1 Y10 F1200\nM2\n", 3);
+    commands.push(ServoCommand::Enable(true)).unwrap();
+
+    COUNTING.with(|c| c.set(true));
+    // Program 1 runs into the jam: a following-error fault, drives off, and
+    // the queue drained (programs 1 to 3 count as aborted).
+    let mut ticks = 0;
+    while tick.snapshot().fault.is_none() && ticks < 10_000 {
+        tick.tick();
+        ticks += 1;
+    }
+    let faulted = *tick.snapshot();
+    tick.tick();
+    let drained = *tick.snapshot();
+    // Clearing the fault and turning on again starts from the measured pose.
+    commands.push(ServoCommand::ClearFault).unwrap();
+    commands.push(ServoCommand::Enable(true)).unwrap();
+    tick.tick();
+    let restarted = *tick.snapshot();
+    // An abort of a program already discarded is ignored; turning the drives
+    // off and on again is harmless at rest.
+    commands.push(ServoCommand::Abort { program: 2 }).unwrap();
+    commands.push(ServoCommand::Enable(false)).unwrap();
+    tick.tick();
+    commands.push(ServoCommand::Enable(true)).unwrap();
+    tick.tick();
+    COUNTING.with(|c| c.set(false));
+
+    assert_eq!(
+        ALLOCATIONS.load(Ordering::Relaxed),
+        0,
+        "the servo tick allocated"
+    );
+    match faulted.fault {
+        Some(ServoFault::FollowingError {
+            joint,
+            error,
+            limit,
+        }) => {
+            assert_eq!((joint, limit), (0, 0.5));
+            assert!(error > 0.5, "error {error}");
+        }
+        other => panic!("expected a following error, got {other:?}"),
+    }
+    // The jammed joint stays at 20 mm; the command ran at most one period
+    // past the limit (1200 mm/min = 0.02 mm per period).
+    assert_eq!(faulted.joints[0], 20.0);
+    assert!(!faulted.enabled);
+    assert_eq!(drained.program_aborted, 3, "the whole queue was discarded");
+    assert_eq!(drained.program_done, 0);
+    assert!(restarted.fault.is_none() && restarted.enabled);
+    assert_eq!(restarted.commanded, restarted.position);
+    assert_eq!(restarted.position.x, 20.0);
+    let last = tick.snapshot();
+    assert_eq!(last.program_aborted, 3, "a stale abort changed nothing");
+    assert!(last.enabled && !last.moving);
 }

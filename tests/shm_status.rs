@@ -17,7 +17,11 @@ fn a_subscriber_sees_every_tick_s_status() {
     let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
     let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
     let (mut producer, consumer) = rtrb::RingBuffer::new(64);
-    let (_commands, command_queue) = rtrb::RingBuffer::new(4);
+    let (mut commands, command_queue) = rtrb::RingBuffer::new(4);
+    // The servo starts with the drives off; a program runs only once on.
+    commands
+        .push(kerf::servo::ServoCommand::Enable(true))
+        .unwrap();
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
     for canon in Interpreter::from_text("G0 X12 Y5 Z-3\nM2\n", "shm.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();

@@ -23,6 +23,21 @@ pub enum Plant {
 pub struct SimConfig {
     #[serde(default)]
     pub plant: Plant,
+    /// Fault injection for tests and demonstrations: a simulated crash.
+    pub jam: Option<Jam>,
+}
+
+/// `[hal.sim.jam]`: joint `joint` seizes when its command first reaches
+/// `at` (joint units) and moves no more, whatever it is commanded. The
+/// controller sees the command run away from the feedback: a following
+/// error.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Jam {
+    /// Joint number, from 0.
+    pub joint: usize,
+    /// Joint position where it seizes, joint units (mm).
+    pub at: f64,
 }
 
 /// The simulated hardware backend.
@@ -30,6 +45,8 @@ pub struct SimConfig {
 pub struct SimHal {
     joints: usize,
     position: [f64; MAX_JOINTS],
+    jam: Option<Jam>,
+    jammed: bool,
 }
 
 impl SimHal {
@@ -45,11 +62,27 @@ impl SimHal {
             });
         }
         let Plant::Ideal = config.plant;
+        if let Some(jam) = config
+            .jam
+            .filter(|j| j.joint >= initial.len() || !j.at.is_finite())
+        {
+            return Err(HalConfigError::Key {
+                key: "sim.jam".into(),
+                reason: format!(
+                    "joint {} at {}: the machine has joints 0 to {} and `at` must be a number",
+                    jam.joint,
+                    jam.at,
+                    initial.len() - 1
+                ),
+            });
+        }
         let mut position = [0.0; MAX_JOINTS];
         position[..initial.len()].copy_from_slice(initial);
         Ok(SimHal {
             joints: initial.len(),
             position,
+            jam: config.jam,
+            jammed: false,
         })
     }
 }
@@ -70,11 +103,25 @@ impl Hal for SimHal {
         feedback: &mut Feedback,
     ) -> Result<(), HalFault> {
         for i in 0..self.joints {
-            let target = if out.enable {
+            let mut target = if out.enable {
                 out.joints[i].position
             } else {
                 self.position[i]
             };
+            if let Some(jam) = self.jam.filter(|j| j.joint == i) {
+                let (lo, hi) = if target < self.position[i] {
+                    (target, self.position[i])
+                } else {
+                    (self.position[i], target)
+                };
+                if !self.jammed && lo <= jam.at && jam.at <= hi && target != self.position[i] {
+                    self.jammed = true;
+                    self.position[i] = jam.at;
+                }
+                if self.jammed {
+                    target = self.position[i];
+                }
+            }
             feedback.joints[i].velocity = (target - self.position[i]) / period;
             feedback.joints[i].position = target;
             self.position[i] = target;
@@ -122,5 +169,31 @@ mod tests {
         let e = toml::from_str::<HalConfig>("backend = \"sim\"\n[sim]\nplant = \"quantum\"")
             .unwrap_err();
         assert!(e.to_string().contains("quantum"), "{e}");
+    }
+
+    #[test]
+    fn a_jammed_joint_stops_where_it_seizes() {
+        let cfg: HalConfig =
+            toml::from_str("backend = \"sim\"\n[sim.jam]\njoint = 0\nat = 2.0").unwrap();
+        let mut hal = build(&cfg, &[0.0, 0.0]).unwrap();
+        let mut out = Setpoints {
+            enable: true,
+            ..Default::default()
+        };
+        let mut fb = Feedback::default();
+        for step in 1..=5 {
+            out.joints[0].position = step as f64;
+            out.joints[1].position = step as f64;
+            hal.exchange(0.001, &out, &mut fb).unwrap();
+        }
+        // Joint 0 passed 2.0 on its way to 5.0 and stayed there; joint 1 is free.
+        assert_eq!(fb.joints[0].position, 2.0);
+        assert_eq!(fb.joints[0].velocity, 0.0);
+        assert_eq!(fb.joints[1].position, 5.0);
+
+        let bad: HalConfig =
+            toml::from_str("backend = \"sim\"\n[sim.jam]\njoint = 3\nat = 2.0").unwrap();
+        let e = build(&bad, &[0.0, 0.0]).err().unwrap().to_string();
+        assert!(e.contains("hal.sim.jam") && e.contains("joint 3"), "{e}");
     }
 }

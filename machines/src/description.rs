@@ -49,6 +49,12 @@ pub struct JointToml {
     pub max_acceleration: f64,
     /// mm/s³; defaults to [`Limits::default_jerk`].
     pub max_jerk: Option<f64>,
+    /// Joint position of the home pose, joint units; defaults to the joint's
+    /// position at the machine origin.
+    pub home: Option<f64>,
+    /// Largest distance between commanded and measured joint position
+    /// before the servo faults, joint units; unchecked when absent.
+    pub following_error: Option<f64>,
 }
 
 impl JointToml {
@@ -139,6 +145,21 @@ impl Description {
                 j.max_jerk,
             )
             .map_err(|(k, r)| key_err(k, r))?;
+            if let Some(f) = j.following_error.filter(|f| !(f.is_finite() && *f > 0.0)) {
+                return Err(key_err(
+                    format!("joints[{i}].following_error"),
+                    format!("must be a positive number, got {f}"),
+                ));
+            }
+            if let Some(h) = j
+                .home
+                .filter(|h| !(h.is_finite() && *h >= j.min && *h <= j.max))
+            {
+                return Err(key_err(
+                    format!("joints[{i}].home"),
+                    format!("{h} is outside the joint's stroke {} .. {}", j.min, j.max),
+                ));
+            }
         }
         for (name, value) in &d.home {
             if !d.axes.contains_key(name) {
@@ -384,6 +405,26 @@ max_acceleration = 1.0
         assert!(
             e.starts_with("m.toml: ") && e.contains("speed") && e.contains("line 3"),
             "{e}"
+        );
+    }
+
+    #[test]
+    fn home_and_following_error_are_checked() {
+        let with = |extra: &str| format!("{GOOD}{extra}\n");
+        let d = Description::parse(&with("home = 4.0\nfollowing_error = 0.5"), "m.toml").unwrap();
+        assert_eq!(
+            (d.joints[0].home, d.joints[0].following_error),
+            (Some(4.0), Some(0.5))
+        );
+        let e = Description::parse(&with("home = 11.0"), "m.toml").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key `joints[0].home`: 11 is outside the joint's stroke 0 .. 10"
+        );
+        let e = Description::parse(&with("following_error = 0.0"), "m.toml").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key `joints[0].following_error`: must be a positive number, got 0"
         );
     }
 }

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use kerf::cli::{self, Failure};
+use kerf::cli::{self, control, offsets, Failure};
+use kerf::protocol::Command;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -16,6 +17,9 @@ struct Args {
     /// kerfd's command socket [default: as kerfd].
     #[arg(long, value_name = "PATH", global = true)]
     socket: Option<PathBuf>,
+    /// Print replies and statuses as JSON, for scripts.
+    #[arg(long, global = true)]
+    json: bool,
     #[command(subcommand)]
     command: Cmd,
 }
@@ -23,15 +27,88 @@ struct Args {
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Print the machine state, current line and position.
-    Status {
-        /// Print the status as JSON.
-        #[arg(long)]
-        json: bool,
+    Status,
+    /// Live view: DRO, state, line, speed, overrides, program progress.
+    Watch {
+        /// Refresh rate, Hz (1 to 1000).
+        #[arg(long, default_value_t = 10.0)]
+        rate: f64,
     },
     /// Run a G-code program and show its progress until it ends.
     Run {
         /// The program file.
         file: PathBuf,
+        /// Start at this source line (earlier lines only set modes).
+        #[arg(long, value_name = "LINE")]
+        from: Option<u32>,
+    },
+    /// Check a program and make it the one `step` (and `run` without a
+    /// file, over the socket) runs.
+    Open {
+        /// The program file.
+        file: PathBuf,
+    },
+    /// Feed hold: decelerate on the path and wait.
+    Pause,
+    /// Release feed hold or single-block stepping.
+    Resume,
+    /// Single-block: run the next line (from idle, starts the opened program).
+    Step,
+    /// Stop the program, MDI, jog or homing, decelerating on the path.
+    Abort,
+    /// Emergency stop: drives off at once.
+    Estop,
+    /// Leave e-stop, or clear a fault.
+    Reset,
+    /// Drives on.
+    On,
+    /// Drives off.
+    Off,
+    /// Execute one line of G-code, e.g. `kerf mdi "G0 X10"`.
+    Mdi {
+        /// The G-code line.
+        line: String,
+    },
+    /// Jog an axis (or a joint with --joint): `kerf jog x + --distance 1`.
+    Jog {
+        /// Axis letter (or joint name or number with --joint).
+        target: String,
+        /// Direction: + or -.
+        #[arg(value_parser = ["+", "-"])]
+        direction: String,
+        /// Move this far, mm, and stop; without it, jog until Enter.
+        #[arg(long, value_name = "MM")]
+        distance: Option<f64>,
+        /// Speed, mm/min.
+        #[arg(long, value_name = "MM_PER_MIN", default_value_t = 600.0)]
+        speed: f64,
+        /// TARGET names a joint rather than an axis.
+        #[arg(long)]
+        joint: bool,
+    },
+    /// Home every joint, or one joint.
+    Home {
+        /// Joint name or number.
+        joint: Option<String>,
+    },
+    /// Set the feed (0–200) or rapid (0–100) override, percent.
+    Override {
+        /// `feed` or `rapid`.
+        #[arg(value_parser = ["feed", "rapid"])]
+        which: String,
+        /// Percent.
+        percent: f64,
+    },
+    /// Show work offsets (G54–G59.3), G92 and G28/G30, or set one:
+    /// `kerf offsets set G54 x=10 y=20`.
+    Offsets {
+        #[command(subcommand)]
+        action: Option<OffsetAction>,
+    },
+    /// Show the tool table, or change it.
+    Tools {
+        #[command(subcommand)]
+        action: Option<ToolAction>,
     },
     /// Interpret a program offline and print its canon commands.
     Canon {
@@ -59,9 +136,6 @@ enum Cmd {
         /// Machine: embedded name or TOML file.
         #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
         machine: String,
-        /// Print the result as JSON.
-        #[arg(long)]
-        json: bool,
     },
     /// Plan a program offline: cycle time, path deviation, limit use.
     Plan {
@@ -74,9 +148,6 @@ enum Cmd {
         /// against time.
         #[arg(long, value_name = "OUT.svg")]
         plot: Option<PathBuf>,
-        /// Print the result as JSON.
-        #[arg(long)]
-        json: bool,
         /// Acceleration-limited (trapezoidal) profiles instead of jerk-limited.
         #[arg(long)]
         trapezoidal: bool,
@@ -90,9 +161,6 @@ enum Cmd {
         /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5) or a TOML file.
         #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
         machine: String,
-        /// Print JSON: {"joints": [...]}, {"pose": {...}} or {"error": "..."}.
-        #[arg(long)]
-        json: bool,
         /// Do not check axis travel and joint strokes (reach is still checked).
         #[arg(long)]
         no_limits: bool,
@@ -131,15 +199,114 @@ enum CanonFormat {
     Linuxcnc,
 }
 
+#[derive(Subcommand, Debug)]
+enum OffsetAction {
+    /// Set axes of an offset: G54 … G59.3, G92, G28 or G30.
+    Set {
+        system: String,
+        /// AXIS=VALUE, mm (degrees for A B C).
+        #[arg(required = true)]
+        values: Vec<String>,
+    },
+}
+
+#[derive(Subcommand, Debug)]
+enum ToolAction {
+    /// Add or change a tool.
+    Set {
+        tool: u32,
+        #[arg(long)]
+        pocket: Option<u32>,
+        /// Diameter, mm.
+        #[arg(long)]
+        diameter: Option<f64>,
+        #[arg(long)]
+        comment: Option<String>,
+        /// Offsets AXIS=VALUE, mm; z is the tool length.
+        offsets: Vec<String>,
+    },
+    /// Remove a tool.
+    Remove { tool: u32 },
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     let socket = args
         .socket
         .clone()
         .unwrap_or_else(kerf::paths::default_socket);
+    let socket = socket.as_path();
+    let json = args.json;
+    let simple = |cmd: Command, done: &str| cli::simple(socket, &cmd, json, done);
     let result = match args.command {
-        Cmd::Status { json } => cli::status::status(&socket, json),
-        Cmd::Run { file } => cli::run::run(&socket, &file),
+        Cmd::Status => cli::status::status(socket, json),
+        Cmd::Watch { rate } => cli::watch::watch(socket, rate, json),
+        Cmd::Run { file, from } => cli::run::run(socket, &file, from, json),
+        Cmd::Open { file } => match std::fs::canonicalize(&file) {
+            Ok(path) => simple(
+                Command::Open {
+                    path: path.display().to_string(),
+                },
+                "opened",
+            ),
+            Err(e) => Err(Failure::new(format!("{}: {e}", file.display()))),
+        },
+        Cmd::Pause => simple(Command::Pause, "paused"),
+        Cmd::Resume => simple(Command::Resume, "resumed"),
+        Cmd::Step => simple(Command::Step, "stepping"),
+        Cmd::Abort => simple(Command::Abort, "aborted"),
+        Cmd::Estop => simple(Command::Estop, "e-stop"),
+        Cmd::Reset => simple(Command::Reset, "reset: the machine is off; `kerf on` next"),
+        Cmd::On => simple(Command::On, "on"),
+        Cmd::Off => simple(Command::Off, "off"),
+        Cmd::Mdi { line } => control::mdi(socket, &line, json),
+        Cmd::Jog {
+            target,
+            direction,
+            distance,
+            speed,
+            joint,
+        } => control::jog(
+            socket,
+            &control::Jog {
+                target: &target,
+                joint,
+                direction: if direction == "+" { 1 } else { -1 },
+                speed,
+                distance,
+            },
+            json,
+        ),
+        Cmd::Home { joint } => control::home(socket, joint.as_deref(), json),
+        Cmd::Override { which, percent } => control::set_override(socket, &which, percent, json),
+        Cmd::Offsets { action } => match action {
+            None => offsets::offsets(socket, None, json),
+            Some(OffsetAction::Set { system, values }) => {
+                offsets::offsets(socket, Some((&system, &values)), json)
+            }
+        },
+        Cmd::Tools { action } => match action {
+            None => offsets::tools(socket, None, None, json),
+            Some(ToolAction::Set {
+                tool,
+                pocket,
+                diameter,
+                comment,
+                offsets: o,
+            }) => offsets::tools(
+                socket,
+                Some(offsets::ToolChange {
+                    tool,
+                    pocket,
+                    offsets: o,
+                    diameter,
+                    comment,
+                }),
+                None,
+                json,
+            ),
+            Some(ToolAction::Remove { tool }) => offsets::tools(socket, None, Some(tool), json),
+        },
         Cmd::Canon {
             format,
             tool_table,
@@ -158,16 +325,11 @@ fn main() -> ExitCode {
                 ini,
             },
         ),
-        Cmd::Check {
-            file,
-            machine,
-            json,
-        } => cli::plan::check(&file, &machine, json),
+        Cmd::Check { file, machine } => cli::plan::check(&file, &machine, json),
         Cmd::Plan {
             file,
             machine,
             plot,
-            json,
             trapezoidal,
             segments,
         } => {
@@ -179,7 +341,6 @@ fn main() -> ExitCode {
         }
         Cmd::Kins {
             machine,
-            json,
             no_limits,
             direction,
         } => {

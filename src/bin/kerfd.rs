@@ -2,40 +2,45 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::time::Duration;
 
+use anyhow::Context;
 use clap::Parser;
+use kerf::config::{self, Config};
 use kerf::daemon::{bind_socket, Daemon, Options};
+use kerf::systemd;
 
 /// The kerf CNC controller daemon. With no arguments it runs the embedded
-/// simulated 3-axis mill `mill3`.
+/// simulated 3-axis mill `mill3`. Flags override the configuration file.
 #[derive(Parser, Debug)]
 #[command(name = "kerfd", version)]
 struct Args {
+    /// Configuration file [default: /etc/kerf/kerf.toml when it exists].
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
     /// Command socket path [default: $KERF_SOCKET, $RUNTIME_DIRECTORY/kerfd.sock,
     /// $XDG_RUNTIME_DIR/kerf/kerfd.sock or /tmp/kerf-$UID/kerfd.sock].
     #[arg(long, value_name = "PATH")]
     socket: Option<PathBuf>,
-    /// Machine to run: an embedded name (mill3) or a machine TOML file.
-    #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
-    machine: String,
-    /// Servo period in microseconds (250 to 10000).
-    #[arg(long, value_name = "US", default_value_t = 1000)]
-    period_us: u32,
+    /// Machine to run: an embedded name (mill3) or a machine TOML file [default: mill3].
+    #[arg(long, value_name = "NAME|FILE")]
+    machine: Option<String>,
+    /// Servo period in microseconds, 250 to 10000 [default: 1000].
+    #[arg(long, value_name = "US")]
+    period_us: Option<u32>,
+    /// Directory of the parameter file and tool table [default:
+    /// $STATE_DIRECTORY, $XDG_STATE_HOME/kerf or ~/.local/state/kerf].
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
 }
 
 fn main() -> ExitCode {
-    tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("KERF_LOG")
-                .unwrap_or_else(|_| "info".into()),
-        )
-        .init();
+    systemd::init_logging();
     let args = Args::parse();
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
+            tracing::error!("{e:#}");
             eprintln!("kerfd: {e:#}");
             ExitCode::FAILURE
         }
@@ -43,25 +48,152 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    let socket = args.socket.unwrap_or_else(kerf::paths::default_socket);
+    let (config, config_name) = match &args.config {
+        Some(path) => (Config::load(path)?, path.display().to_string()),
+        None if std::path::Path::new(config::SYSTEM_CONFIG).exists() => (
+            Config::load(std::path::Path::new(config::SYSTEM_CONFIG))?,
+            config::SYSTEM_CONFIG.to_string(),
+        ),
+        None => (Config::default(), "(no configuration file)".to_string()),
+    };
+    let tcp = config.tcp(&config_name)?;
+    let socket = args
+        .socket
+        .or(config.socket.path.clone())
+        .unwrap_or_else(kerf::paths::default_socket);
+    let options = Options {
+        machine: args
+            .machine
+            .or(config.machine.clone())
+            .unwrap_or_else(|| kerf_machines::DEFAULT_MACHINE.into()),
+        period_us: args.period_us.or(config.servo.period_us).unwrap_or(1000),
+        priority: config.servo.priority.unwrap_or(80),
+        cpu: config.servo.cpu,
+        state_dir: args
+            .state_dir
+            .or(config.state_dir.clone())
+            .unwrap_or_else(kerf::paths::default_state_dir),
+        tcp_token: tcp.as_ref().and_then(|t| t.token.clone()),
+    };
+    tracing::info!(config = %config_name, "starting");
+    lock_memory();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()?;
-    let mut daemon = Daemon::start(&Options {
-        machine: args.machine,
-        period_us: args.period_us,
-    })?;
+    let mut daemon = Daemon::start(&options)?;
     let result = runtime.block_on(async {
-        let listener = bind_socket(&socket)?;
+        let unix = bind_socket(&socket, config.socket.group.as_deref())?;
+        let tcp_listener =
+            match &tcp {
+                Some(t) => Some(tokio::net::TcpListener::bind(t.listen).await.with_context(
+                    || {
+                        format!(
+                            "{config_name}: key `tcp.listen`: cannot listen on {}",
+                            t.listen
+                        )
+                    },
+                )?),
+                None => None,
+            };
+        if let (Some(t), Some(l)) = (&tcp, &tcp_listener) {
+            let address = l.local_addr().unwrap_or(t.listen);
+            tracing::info!(%address, token = t.token.is_some(), "listening on TCP");
+        }
         tracing::info!(socket = %socket.display(), "listening");
-        daemon.serve(listener, shutdown_signal()).await;
+        let status = daemon.status();
+        systemd::ready(&format!(
+            "machine {} in {:?}; socket {}",
+            status.machine,
+            status.state,
+            socket.display()
+        ));
+        let watchdog = tokio::spawn(feed_watchdog(daemon_ticks(&daemon)));
+        let status_line = tokio::spawn(show_state(daemon.events()));
+        daemon.serve(unix, tcp_listener, shutdown_signal()).await;
+        watchdog.abort();
+        status_line.abort();
+        systemd::stopping("stopping: bringing motion to rest");
+        tracing::info!("stopping");
+        let report = daemon.shutdown(Duration::from_secs(5)).await;
+        tracing::info!("{report}");
         anyhow::Ok(())
     });
-    tracing::info!("stopping");
     daemon.stop();
     let _ = std::fs::remove_file(&socket);
+    tracing::info!("stopped");
     result
+}
+
+/// Keep every page of the process in RAM, so the servo thread never waits
+/// for a page fault. Only where the memory-lock limit is unlimited (or we
+/// are root): with a finite limit, `MCL_FUTURE` would make allocations past
+/// it fail later, which is worse than the page faults.
+fn lock_memory() {
+    use nix::sys::mman::{mlockall, MlockAllFlags};
+    use nix::sys::resource::{getrlimit, Resource, RLIM_INFINITY};
+    let unlimited =
+        getrlimit(Resource::RLIMIT_MEMLOCK).is_ok_and(|(soft, _)| soft == RLIM_INFINITY);
+    if !unlimited && !nix::unistd::geteuid().is_root() {
+        tracing::warn!(
+            "not locking memory: the memory-lock limit is finite (LimitMEMLOCK=infinity in the unit, \
+             or `ulimit -l unlimited`); page faults may delay the servo"
+        );
+        return;
+    }
+    match mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE) {
+        Ok(()) => tracing::info!("memory locked"),
+        Err(e) => tracing::warn!("cannot lock memory ({e}): page faults may delay the servo"),
+    }
+}
+
+/// A function reading the servo's tick count, for the watchdog.
+fn daemon_ticks(daemon: &Daemon) -> impl Fn() -> u64 + Send + 'static {
+    let reader = daemon.snapshot_reader();
+    move || reader.read().ticks
+}
+
+/// Ping the systemd watchdog at half its timeout, but only while the servo
+/// keeps ticking: if it stalls, systemd notices and restarts kerfd.
+async fn feed_watchdog(ticks: impl Fn() -> u64) {
+    let Some(interval) = systemd::watchdog_interval() else {
+        return;
+    };
+    tracing::info!(?interval, "feeding the systemd watchdog");
+    let mut last = ticks();
+    let mut timer = tokio::time::interval(interval);
+    loop {
+        timer.tick().await;
+        let now = ticks();
+        if now != last {
+            systemd::watchdog();
+        } else {
+            tracing::error!("servo thread stalled: not feeding the watchdog");
+        }
+        last = now;
+    }
+}
+
+/// Keep systemd's status line (`systemctl status kerfd`) on the machine
+/// state and why it last changed.
+async fn show_state(mut events: tokio::sync::broadcast::Receiver<std::sync::Arc<str>>) {
+    use kerf::protocol::{Event, ServerLine};
+    loop {
+        let line = match events.recv().await {
+            Ok(line) => line,
+            Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => continue,
+            Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
+        };
+        if let Ok(ServerLine::Event(Event::State { state, reason, .. })) =
+            serde_json::from_str::<ServerLine>(&line)
+        {
+            systemd::status(&format!(
+                "{}{}",
+                kerf::machine::state_name(state),
+                reason.map(|r| format!(": {r}")).unwrap_or_default()
+            ));
+        }
+    }
 }
 
 async fn shutdown_signal() {

@@ -1,17 +1,24 @@
 //! The `kerf` command's subcommands, one module each.
 //!
 //! Each subcommand is a function returning `Result<(), Failure>`; `main` in
-//! `src/bin/kerf.rs` only parses arguments and dispatches.
+//! `src/bin/kerf.rs` only parses arguments and dispatches. Output is for
+//! people by default; with `--json` each command prints the daemon's reply
+//! (or final status) as JSON for scripts.
 
 pub mod canon;
+pub mod control;
 pub mod kins;
+pub mod offsets;
 pub mod plan;
 pub mod run;
 pub mod status;
+pub mod watch;
 pub mod workspace;
 
-use crate::client::ClientError;
-use crate::protocol::Status;
+use std::path::Path;
+
+use crate::client::{Client, ClientError};
+use crate::protocol::{Command, Status};
 
 /// Exit status for a failed command.
 pub const FAILED: u8 = 1;
@@ -40,11 +47,34 @@ impl From<ClientError> for Failure {
     }
 }
 
-/// The position of a status as `X   1.0000  Y   2.0000 ...`.
-pub fn fmt_position(status: &Status) -> String {
-    status
-        .position
-        .iter()
+/// Print a JSON value, pretty.
+pub fn print_json(v: &serde_json::Value) {
+    println!("{}", serde_json::to_string_pretty(v).expect("JSON value"));
+}
+
+/// Send one command; print `done` (or the reply with `json`).
+pub fn simple(socket: &Path, cmd: &Command, json: bool, done: &str) -> Result<(), Failure> {
+    let mut client = Client::connect(socket)?;
+    let reply = client.request(cmd)?;
+    if json {
+        print_json(&reply);
+    } else if !done.is_empty() {
+        println!("{done}");
+    }
+    Ok(())
+}
+
+/// The protocol name of a serialisable enum value, e.g. `estop_reset`.
+pub fn name<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_value(v)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_else(|| "?".into())
+}
+
+/// A map of axis letters to numbers as `X   1.0000  Y   2.0000 ...`.
+pub fn fmt_axes(axes: &serde_json::Map<String, serde_json::Value>) -> String {
+    axes.iter()
         .map(|(axis, v)| {
             format!(
                 "{}{:>10.4}",
@@ -54,4 +84,17 @@ pub fn fmt_position(status: &Status) -> String {
         })
         .collect::<Vec<_>>()
         .join("  ")
+}
+
+/// The position of a status as `X   1.0000  Y   2.0000 ...`.
+pub fn fmt_position(status: &Status) -> String {
+    fmt_axes(&status.position)
+}
+
+/// The state as shown to people: `auto (paused)`, `idle`, …
+pub fn fmt_state(status: &Status) -> String {
+    match status.execution {
+        Some(e) => format!("{} ({})", name(&status.state), name(&e)),
+        None => name(&status.state),
+    }
 }

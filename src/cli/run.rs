@@ -3,66 +3,72 @@
 use std::io::{IsTerminal, Write};
 use std::path::Path;
 
-use super::{fmt_position, Failure, FAILED};
+use super::{fmt_position, print_json, Failure, FAILED};
 use crate::client::Client;
-use crate::protocol::{Command, Event, ProgramState};
+use crate::protocol::{Command, ProgramState};
 
-/// Send `file` to kerfd, show progress, and fail if the program fails.
-pub fn run(socket: &Path, file: &Path) -> Result<(), Failure> {
+/// Send `file` to kerfd (from line `from`), show progress, and fail if the
+/// program fails. With `json`, print only the final status as JSON.
+pub fn run(socket: &Path, file: &Path, from: Option<u32>, json: bool) -> Result<(), Failure> {
     let path = std::fs::canonicalize(file)
         .map_err(|e| Failure::new(format!("{}: {e}", file.display())))?;
     let mut client = Client::connect(socket)?;
     let reply = client.request(&Command::Run {
-        path: path.display().to_string(),
+        path: Some(path.display().to_string()),
+        line: from,
     })?;
     let id = reply["program"]
         .as_u64()
         .ok_or_else(|| Failure::new(format!("bad run reply: {reply}")))? as u32;
-    client.request(&Command::Subscribe { rate_hz: 10.0 })?;
-    let tty = std::io::stdout().is_terminal();
+    let tty = std::io::stdout().is_terminal() && !json;
     let mut last_line = u32::MAX;
     let started = std::time::Instant::now();
-    loop {
-        let Event::Status { status } = client.next_event()?;
+    let end = client.wait_job(id, 10.0, |status| {
         let Some(program) = status.program.as_ref().filter(|p| p.id == id) else {
-            continue;
+            return;
         };
-        let done = program.state != ProgramState::Running;
-        if status.line != last_line || done {
-            last_line = status.line;
-            let text = format!(
-                "line {:>6}/{}  {}",
-                status.line,
-                program.lines,
-                fmt_position(&status)
-            );
-            if tty {
-                print!("\r{text}");
-                let _ = std::io::stdout().flush();
-            } else {
-                println!("{text}");
-            }
+        if json || status.line == last_line {
+            return;
         }
-        if done {
-            if tty {
-                println!();
-            }
-            return match program.state {
-                ProgramState::Finished => {
-                    println!(
-                        "program finished in {:.1} s",
-                        started.elapsed().as_secs_f64()
-                    );
-                    Ok(())
-                }
-                _ => Err(Failure(
-                    FAILED,
-                    format!(
-                        "program failed: {}",
-                        program.error.as_deref().unwrap_or("unknown reason")
-                    ),
-                )),
-            };
+        last_line = status.line;
+        let text = format!(
+            "line {:>6}/{}  {}",
+            status.line,
+            program.lines,
+            fmt_position(status)
+        );
+        if tty {
+            print!("\r{text}");
+            let _ = std::io::stdout().flush();
+        } else {
+            println!("{text}");
         }
+    })?;
+    if tty {
+        println!();
+    }
+    if json {
+        print_json(&serde_json::to_value(&end).expect("status serialises"));
+    }
+    let program = end.program.as_ref().filter(|p| p.id == id);
+    match program.map(|p| (p.state, p.error.clone())) {
+        Some((ProgramState::Finished, _)) => {
+            if !json {
+                println!(
+                    "program finished in {:.1} s",
+                    started.elapsed().as_secs_f64()
+                );
+            }
+            Ok(())
+        }
+        Some((state, error)) => Err(Failure(
+            FAILED,
+            format!(
+                "program {}: {}",
+                super::name(&state),
+                error.as_deref().unwrap_or("no reason given")
+            ),
+        )),
+        None => Err(Failure::new("the program's status was lost")),
     }
 }
