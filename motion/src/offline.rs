@@ -12,7 +12,7 @@ use kerf_interp::{Canon, CanonCmd, InterpError, Position};
 
 use crate::exec::Executor;
 use crate::kinematics::{Kinematics, MAX_JOINTS};
-use crate::path::Vec9;
+use crate::path::{Arc, Shape, Vec9};
 use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SegmentKind};
 
 /// Why an offline run stopped early.
@@ -83,6 +83,8 @@ pub struct Report {
     /// Largest distance of the commanded tool point from the programmed
     /// moves, mm.
     pub max_deviation: f64,
+    /// Where it was: time (s) and source line.
+    pub max_deviation_at: (f64, u32),
     pub axes: Vec<LimitUse>,
     pub joints: Vec<LimitUse>,
     /// Up to `record` evenly spaced points of the trajectory.
@@ -207,17 +209,58 @@ pub fn run(
                 }
                 Some(canon) => {
                     let canon = canon?;
-                    if let CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end } =
-                        canon.cmd
-                    {
-                        let end = end.to_array();
-                        programmed.push_back(Programmed {
-                            line: canon.source.line,
-                            start: last_end,
+                    match &canon.cmd {
+                        // A move that goes nowhere (an F word alone on a
+                        // G1 line) is no geometry to measure against.
+                        CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
+                            if end.to_array() != last_end =>
+                        {
+                            let end = end.to_array();
+                            programmed.push_back(Programmed {
+                                line: canon.source.line,
+                                start: last_end,
+                                end,
+                            });
+                            report.programmed.push([end[0], end[1], end[2]]);
+                            last_end = end;
+                        }
+                        CanonCmd::ArcFeed {
                             end,
-                        });
-                        report.programmed.push([end[0], end[1], end[2]]);
-                        last_end = end;
+                            center,
+                            plane,
+                            turns,
+                        } => {
+                            // The arc as chords whose sag is under 0.1 µm,
+                            // so the deviation measured against them is the
+                            // deviation from the arc to that precision.
+                            let [first, second, _] = plane.axes();
+                            let arc = Arc::from_program(
+                                &last_end,
+                                &end.to_array(),
+                                (first.index(), second.index()),
+                                (center[0], center[1]),
+                                *turns,
+                            );
+                            let shape = Shape::Arc(arc);
+                            let radius = arc.radius.max(arc.end_radius).max(1e-9);
+                            let step = 2.0 * (1.0 - 1e-4 / radius).clamp(-1.0, 1.0).acos();
+                            let n = ((arc.sweep.abs() / step.max(1e-6)).ceil() as usize)
+                                .clamp(1, 100_000);
+                            let len = shape.length();
+                            let mut from = last_end;
+                            for k in 1..=n {
+                                let to = shape.point(len * k as f64 / n as f64);
+                                programmed.push_back(Programmed {
+                                    line: canon.source.line,
+                                    start: from,
+                                    end: to,
+                                });
+                                report.programmed.push([to[0], to[1], to[2]]);
+                                from = to;
+                            }
+                            last_end = end.to_array();
+                        }
+                        _ => {}
                     }
                     planner.plan(&canon)?;
                 }
@@ -250,8 +293,9 @@ pub fn run(
             .take_while(|m| m.line <= sample.line + 1)
             .map(|m| distance_to_segment(&p, &m.start, &m.end))
             .fold(f64::INFINITY, f64::min);
-        if near.is_finite() {
-            report.max_deviation = report.max_deviation.max(near);
+        if near.is_finite() && near > report.max_deviation {
+            report.max_deviation = near;
+            report.max_deviation_at = (time, sample.line);
         }
 
         for (k, spec) in axis_specs.iter().enumerate() {

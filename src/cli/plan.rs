@@ -186,7 +186,11 @@ fn print_report(machine: &str, report: &Report) -> std::io::Result<()> {
     writeln!(out, "machine          {machine}")?;
     writeln!(out, "cycle time       {:.3} s", report.cycle_time)?;
     writeln!(out, "segments         {}", report.segments)?;
-    writeln!(out, "max deviation    {:.6} mm", report.max_deviation)?;
+    writeln!(
+        out,
+        "max deviation    {:.6} mm (line {} at {:.3} s)",
+        report.max_deviation, report.max_deviation_at.1, report.max_deviation_at.0
+    )?;
     writeln!(out, "max limit use    {:.6}", report.max_limit_ratio())?;
     writeln!(out)?;
     writeln!(
