@@ -1084,12 +1084,14 @@ mod simulation {
         assert!(a <= 1.0 + 1e-6, "acceleration use {a}");
         assert!(j <= 1.0 + 1e-6, "jerk use {j}");
         // Blending shallow corners keeps speed: much faster than stopping
-        // at each (measured 1.9 times at P0.05; at P0.01 the blends are too
-        // tight for the jerk limit and stopping wins, see docs/motion.md).
+        // at each. Measured 1.46 times at P0.05 (1.9 before the curvature
+        // rates got their sampling allowance, which fixed jerk overshoots);
+        // at P0.01 the blends are too tight for the jerk limit and stopping
+        // wins, see docs/motion.md.
         let mut stop = planned(&polygon(""), PathMode::ExactStop);
         let stopping = run(&mut stop, |_, _| {});
         assert!(
-            3 * out.len() < 2 * stopping.len(),
+            10 * out.len() < 7 * stopping.len(),
             "blended {} ticks, exact stop {}",
             out.len(),
             stopping.len()
