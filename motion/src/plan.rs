@@ -49,6 +49,10 @@ pub struct Segment {
     pub max_jerk: f64,
     /// Highest speed at the junction with the next segment, mm/s.
     pub exit_velocity: f64,
+    /// Cutting-force control along this segment, as the program asked
+    /// ([`Planner::set_force_control`]): the target force, N, or `None`
+    /// for off. The servo applies a change when the segment starts.
+    pub force_control: Option<f64>,
 }
 
 impl Segment {
@@ -65,6 +69,7 @@ impl Segment {
             max_acceleration: f64::INFINITY,
             max_jerk: f64::INFINITY,
             exit_velocity: 0.0,
+            force_control: None,
         }
     }
 
@@ -167,6 +172,8 @@ pub struct Planner<'k> {
     mode: PathMode,
     /// Programmed feed, mm/s.
     feed: f64,
+    /// Programmed cutting-force control: target force, N.
+    force_control: Option<f64>,
     position: Position,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
@@ -220,6 +227,7 @@ impl<'k> Planner<'k> {
             sample_joints,
             mode: config.mode,
             feed: 0.0,
+            force_control: None,
             position: start,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
@@ -234,6 +242,14 @@ impl<'k> Planner<'k> {
     /// Set the path control mode for the following moves.
     pub fn set_mode(&mut self, mode: PathMode) {
         self.mode = mode;
+    }
+
+    /// Cutting-force control for the following moves: on with target
+    /// force `newtons`, or off (`None`). This is what the program's
+    /// force-control M-code (`docs/control.md`) is to call; it travels with
+    /// the segments, so it takes effect in step with the motion.
+    pub fn set_force_control(&mut self, newtons: Option<f64>) {
+        self.force_control = newtons;
     }
 
     /// The next segment whose successors are known, if any.
@@ -617,6 +633,7 @@ impl<'k> Planner<'k> {
             max_acceleration: a,
             max_jerk: j,
             exit_velocity: 0.0,
+            force_control: self.force_control,
         }
     }
 
