@@ -21,16 +21,16 @@ use tokio::net::{UnixListener, UnixStream};
 use tokio::sync::mpsc;
 
 use crate::protocol::{
-    self, Command, ErrorCode, Event, MachineState, ProgramState, ProgramStatus, ServerLine,
-    ServoStatus, Status, PROTOCOL_VERSION,
+    self, Command, ErrorCode, Event, ForceStatus, Latency, MachineState, ProgramState,
+    ProgramStatus, ServerLine, ServoStatus, Status, PROTOCOL_VERSION,
 };
 use crate::seqlock::{seqlock, Reader};
-use crate::servo::{ServoCommand, ServoThread, ServoTick, Snapshot};
+use crate::servo::{self, Pacing, RealTime, ServoCommand, ServoThread, ServoTick, Snapshot};
 
 /// Segments the planner may run ahead of the servo: the executor looks
 /// ahead over all of them (at least 2000 segments, and 0.5 s of motion even
 /// for 0.02 mm segments at 2 m/min).
-const QUEUE_CAPACITY: usize = 8192;
+pub const QUEUE_CAPACITY: usize = 8192;
 
 /// How the daemon is started.
 #[derive(Clone, Debug)]
@@ -39,6 +39,11 @@ pub struct Options {
     pub machine: String,
     /// Servo period, µs (250 to 10000).
     pub period_us: u32,
+    /// Wall-clock or virtual-clock servo.
+    pub pacing: Pacing,
+    /// Real-time settings of the servo thread (with a wall clock); `None`:
+    /// ordinary scheduling and no memory locking.
+    pub realtime: Option<RealTime>,
 }
 
 impl Default for Options {
@@ -46,6 +51,8 @@ impl Default for Options {
         Options {
             machine: kerf_machines::DEFAULT_MACHINE.into(),
             period_us: 1000,
+            pacing: Pacing::Wall,
+            realtime: None,
         }
     }
 }
@@ -74,6 +81,11 @@ struct Shared {
     programs: Mutex<Programs>,
     /// Operator commands to the servo thread.
     commands: Mutex<rtrb::Producer<ServoCommand>>,
+    pacing: Pacing,
+    memory_locked: bool,
+    realtime: servo::RealTimeReport,
+    /// The machine's `[force_control]` target, if it has the table.
+    force_control: Option<Option<f64>>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -107,6 +119,7 @@ impl Daemon {
         kinematics
             .inverse(&start, &mut joints)
             .map_err(|e| anyhow::anyhow!("{origin}: the machine origin is not reachable: {e}"))?;
+        servo::check_cutting(&hal_config, &*kinematics).with_context(|| origin.clone())?;
         let hal = kerf_io::build(&hal_config, &joints).with_context(|| origin.clone())?;
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         let (commands, command_queue) = rtrb::RingBuffer::new(64);
@@ -119,6 +132,7 @@ impl Daemon {
             consumer,
             command_queue,
         )?;
+        tick.configure(&description);
         if let Some(shm) = &hal_config.shm {
             let instance = shm
                 .instance
@@ -130,8 +144,33 @@ impl Daemon {
             tracing::info!(%instance, "status and pins exported over shared memory");
         }
         let (writer, reader) = seqlock(*tick.snapshot());
-        let servo = ServoThread::spawn(tick, writer).context("cannot start the servo thread")?;
-        tracing::info!(machine = %description.name, %origin, period_us = options.period_us, "servo running");
+        let realtime = match options.pacing {
+            Pacing::Wall => options.realtime,
+            Pacing::Virtual => None,
+        };
+        let memory_locked = match realtime.map(|_| servo::lock_memory()) {
+            Some(Ok(())) => true,
+            Some(Err(why)) => {
+                tracing::warn!("{why}");
+                false
+            }
+            None => false,
+        };
+        let servo = ServoThread::spawn(tick, writer, options.pacing, realtime.unwrap_or_default())
+            .context("cannot start the servo thread")?;
+        for warning in &servo.realtime().warnings {
+            tracing::warn!("{warning}");
+        }
+        tracing::info!(
+            machine = %description.name,
+            %origin,
+            period_us = options.period_us,
+            clock = ?options.pacing,
+            sched_fifo = servo.realtime().fifo,
+            memory_locked,
+            "servo running"
+        );
+        let realtime = servo.realtime().clone();
         Ok(Daemon {
             shared: Arc::new(Shared {
                 machine: description.name,
@@ -143,6 +182,10 @@ impl Daemon {
                     ..PlannerConfig::default()
                 },
                 commands: Mutex::new(commands),
+                pacing: options.pacing,
+                memory_locked,
+                realtime,
+                force_control: description.force_control.map(|f| f.target),
                 programs: Mutex::new(Programs {
                     current: None,
                     next_id: 1,
@@ -273,12 +316,75 @@ impl Shared {
             joints: snap.joints[..snap.joint_count].to_vec(),
             program,
             fault: snap.fault.map(|f| f.to_string()),
+            following_error: snap.following_error[..snap.joint_count].to_vec(),
+            force: snap.force.map(|f| ForceStatus {
+                enabled: f.target.is_some(),
+                target_n: f.target,
+                force_n: f.force,
+                feed_override: f.feed_override,
+            }),
             servo: ServoStatus {
                 period_us: self.period_us,
                 ticks: snap.ticks,
                 overruns: snap.overruns,
+                clock: match self.pacing {
+                    Pacing::Wall => "wall",
+                    Pacing::Virtual => "virtual",
+                }
+                .into(),
+                sched_fifo: self.realtime.fifo,
+                memory_locked: self.memory_locked,
+                cpu: self.realtime.cpu,
+                latency: {
+                    let l = snap.latency;
+                    let us = |ns: u64| ns as f64 / 1000.0;
+                    Latency {
+                        samples: l.samples,
+                        min_us: us(l.min_ns),
+                        median_us: us(l.median_ns),
+                        p99_us: us(l.p99_ns),
+                        p999_us: us(l.p999_ns),
+                        max_us: us(l.max_ns),
+                    }
+                },
             },
         }
+    }
+
+    /// `force_control`: turn the force controller on or off.
+    fn force_control(&self, enabled: bool, target_n: Option<f64>) -> Result<Value, Refusal> {
+        let Some(configured) = self.force_control else {
+            return Err((
+                ErrorCode::InvalidArgument,
+                format!(
+                    "machine {} has no force controller: add [spindle] and [force_control] to its description",
+                    self.machine
+                ),
+            ));
+        };
+        let target = if enabled {
+            let current = self.status.read().force.and_then(|f| f.target);
+            match target_n.or(current).or(configured) {
+                Some(t) if t.is_finite() && t > 0.0 => Some(t),
+                Some(t) => {
+                    return Err((
+                        ErrorCode::InvalidArgument,
+                        format!("target_n {t} is not a usable force: give newtons > 0"),
+                    ))
+                }
+                None => {
+                    return Err((
+                        ErrorCode::InvalidArgument,
+                        "no target force: give target_n (N)".into(),
+                    ))
+                }
+            }
+        } else {
+            None
+        };
+        self.servo_command(ServoCommand::ForceControl(target))
+            .map_err(|_| (ErrorCode::Busy, "the servo's command queue is full".into()))?;
+        Ok(json!({"enabled": enabled, "target_n": target}))
     }
 }
 
@@ -379,6 +485,12 @@ async fn serve_client(stream: UnixStream, shared: Arc<Shared>) {
                         subscription =
                             Some(spawn_subscription(shared.clone(), tx.clone(), rate_hz));
                         ServerLine::ok(id, json!({"rate_hz": rate_hz}))
+                    }
+                }
+                Ok((id, Command::ForceControl { enabled, target_n })) => {
+                    match shared.force_control(enabled, target_n) {
+                        Ok(v) => ServerLine::ok(id, v),
+                        Err((code, message)) => ServerLine::error(id, code, message),
                     }
                 }
                 Ok((id, Command::Unsubscribe)) => {

@@ -11,8 +11,10 @@
 pub mod cli;
 pub mod client;
 pub mod daemon;
+pub mod latency;
 pub mod paths;
 pub mod protocol;
 pub mod seqlock;
 pub mod servo;
+pub mod simulate;
 pub mod svg;

@@ -29,6 +29,13 @@ pub enum Command {
     Subscribe { rate_hz: f64 },
     /// Stop status events.
     Unsubscribe,
+    /// Cutting-force control on (with target force `target_n`, N, or the
+    /// machine's configured target) or off.
+    ForceControl {
+        enabled: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        target_n: Option<f64>,
+    },
 }
 
 /// Error codes carried in error replies.
@@ -119,6 +126,43 @@ pub struct ServoStatus {
     pub period_us: u32,
     pub ticks: u64,
     pub overruns: u64,
+    /// `wall` (real time) or `virtual` (`kerfd --virtual-clock`).
+    pub clock: String,
+    /// Running under SCHED_FIFO.
+    pub sched_fifo: bool,
+    /// The process's memory is locked (mlockall).
+    pub memory_locked: bool,
+    /// CPU the servo thread is pinned to.
+    pub cpu: Option<usize>,
+    /// How late the servo thread woke after its deadlines, µs.
+    pub latency: Latency,
+}
+
+/// Wake-up latency figures, µs.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
+pub struct Latency {
+    /// Wake-ups measured (0 on a virtual clock).
+    pub samples: u64,
+    pub min_us: f64,
+    pub median_us: f64,
+    pub p99_us: f64,
+    pub p999_us: f64,
+    pub max_us: f64,
+}
+
+/// The cutting-force controller's state.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+pub struct ForceStatus {
+    /// Force control is on.
+    pub enabled: bool,
+    /// Target force F_d, N (null while off).
+    pub target_n: Option<f64>,
+    /// Largest force of the last spindle revolution, from the spindle
+    /// current, N.
+    pub force_n: f64,
+    /// Feed override the controller sets (1 while off); the feed is
+    /// programmed × operator override × this.
+    pub feed_override: f64,
 }
 
 /// A status snapshot.
@@ -137,6 +181,10 @@ pub struct Status {
     pub program: Option<ProgramStatus>,
     /// Why motion stopped, in fault state.
     pub fault: Option<String>,
+    /// Commanded minus measured position per joint, joint units (mm).
+    pub following_error: Vec<f64>,
+    /// The cutting-force controller; null on machines without one.
+    pub force: Option<ForceStatus>,
     pub servo: ServoStatus,
 }
 
@@ -196,7 +244,14 @@ pub fn parse_request(line: &[u8]) -> Result<(Value, Command), ServerLine> {
             ));
         }
     };
-    const KNOWN: [&str; 5] = ["hello", "status", "run", "subscribe", "unsubscribe"];
+    const KNOWN: [&str; 6] = [
+        "hello",
+        "status",
+        "run",
+        "subscribe",
+        "unsubscribe",
+        "force_control",
+    ];
     if !KNOWN.contains(&cmd.as_str()) {
         return Err(ServerLine::error(
             id,

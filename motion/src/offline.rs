@@ -118,6 +118,79 @@ struct Programmed {
     end: Vec9,
 }
 
+/// The programmed moves (as straight lines between their end points) near
+/// where the machine is, to measure how far a point is from the path.
+///
+/// Moves are added as the program is read, ahead of the machine; moves
+/// more than `keep_back` mm of path behind the executing line are dropped
+/// (at least one move before it is always kept: blends sit between two
+/// moves).
+#[derive(Clone, Debug)]
+pub struct PathWindow {
+    moves: VecDeque<Programmed>,
+    last_end: Vec9,
+    keep_back: f64,
+}
+
+impl PathWindow {
+    /// An empty path starting at `start`, keeping `keep_back` mm of moves
+    /// behind the executing line.
+    pub fn new(start: Position, keep_back: f64) -> PathWindow {
+        PathWindow {
+            moves: VecDeque::new(),
+            last_end: start.to_array(),
+            keep_back,
+        }
+    }
+
+    /// Record the move of `canon`, if it is a straight move; returns its
+    /// end point (XYZ) when it is.
+    pub fn push(&mut self, canon: &Canon) -> Option<[f64; 3]> {
+        let (CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }) = canon.cmd
+        else {
+            return None;
+        };
+        let end = end.to_array();
+        self.moves.push_back(Programmed {
+            line: canon.source.line,
+            start: self.last_end,
+            end,
+        });
+        self.last_end = end;
+        Some([end[0], end[1], end[2]])
+    }
+
+    /// XYZ distance of `p` from the nearest kept move up to line `line` + 1,
+    /// with `line` executing now; `None` before any move.
+    pub fn distance(&mut self, p: &Position, line: u32) -> Option<f64> {
+        let length = |m: &Programmed| {
+            (0..3)
+                .map(|i| (m.end[i] - m.start[i]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        loop {
+            let before = self.moves.iter().take_while(|m| m.line < line).count();
+            if before < 2 {
+                break;
+            }
+            let behind: f64 = self.moves.iter().take(before).skip(1).map(length).sum();
+            if behind < self.keep_back {
+                break;
+            }
+            self.moves.pop_front();
+        }
+        let p = p.to_array();
+        let near = self
+            .moves
+            .iter()
+            .take_while(|m| m.line <= line + 1)
+            .map(|m| distance_to_segment(&p, &m.start, &m.end))
+            .fold(f64::INFINITY, f64::min);
+        near.is_finite().then_some(near)
+    }
+}
+
 /// Distance from `p` to the segment a–b in XYZ.
 fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
     let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
@@ -169,8 +242,7 @@ pub fn run(
     let mut queue: VecDeque<Segment> = VecDeque::new();
     let mut executor = Executor::new(start);
     let mut report = Report::default();
-    let mut programmed: VecDeque<Programmed> = VecDeque::new();
-    let mut last_end = start.to_array();
+    let mut programmed = PathWindow::new(start, 0.0);
     let njoints = kins.joints().len();
 
     let axis_specs = kins.axes().to_vec();
@@ -207,17 +279,8 @@ pub fn run(
                 }
                 Some(canon) => {
                     let canon = canon?;
-                    if let CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end } =
-                        canon.cmd
-                    {
-                        let end = end.to_array();
-                        programmed.push_back(Programmed {
-                            line: canon.source.line,
-                            start: last_end,
-                            end,
-                        });
-                        report.programmed.push([end[0], end[1], end[2]]);
-                        last_end = end;
+                    if let Some(end) = programmed.push(&canon) {
+                        report.programmed.push(end);
                     }
                     planner.plan(&canon)?;
                 }
@@ -243,15 +306,7 @@ pub fn run(
 
         // Deviation: distance to the nearest programmed move around the
         // executing line (blends sit between two moves).
-        while programmed.len() > 2 && programmed[1].line < sample.line {
-            programmed.pop_front();
-        }
-        let near = programmed
-            .iter()
-            .take_while(|m| m.line <= sample.line + 1)
-            .map(|m| distance_to_segment(&p, &m.start, &m.end))
-            .fold(f64::INFINITY, f64::min);
-        if near.is_finite() {
+        if let Some(near) = programmed.distance(&sample.position, sample.line) {
             report.max_deviation = report.max_deviation.max(near);
         }
 

@@ -27,6 +27,15 @@ enum Cmd {
         /// Print the status as JSON.
         #[arg(long)]
         json: bool,
+        /// Print the servo thread's wake-up latency (min, median, p99,
+        /// p99.9, max) and real-time settings.
+        #[arg(long)]
+        latency: bool,
+    },
+    /// Turn cutting-force control on (with a target force) or off.
+    Force {
+        #[command(subcommand)]
+        action: ForceAction,
     },
     /// Run a G-code program and show its progress until it ends.
     Run {
@@ -52,18 +61,8 @@ enum Cmd {
     },
     /// Plan a program offline: cycle time, path deviation, limit use.
     Plan {
-        /// The program file.
-        file: PathBuf,
-        /// Machine: embedded name or TOML file.
-        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
-        /// Write an SVG plot of the path and of position, joints and feed
-        /// against time.
-        #[arg(long, value_name = "OUT.svg")]
-        plot: Option<PathBuf>,
-        /// Print the result as JSON.
-        #[arg(long)]
-        json: bool,
+        #[command(flatten)]
+        run: OfflineRun,
         /// Acceleration-limited (trapezoidal) profiles instead of jerk-limited.
         #[arg(long)]
         trapezoidal: bool,
@@ -71,6 +70,27 @@ enum Cmd {
         /// acceleration mm/s², jerk mm/s³) instead of running the plan.
         #[arg(long)]
         segments: bool,
+    },
+    /// Run a program on the simulated machine (servo loops, plant and
+    /// cutting process) on a virtual clock: cycle time, following and
+    /// contour error, cutting force and the force controller.
+    Sim {
+        #[command(flatten)]
+        run: OfflineRun,
+        /// The seed's pure PD: no velocity or acceleration feedforward.
+        #[arg(long)]
+        no_feedforward: bool,
+        /// Plant of the simulated joints [default: identified].
+        #[arg(long, value_enum, default_value = "identified")]
+        plant: PlantArg,
+        /// Force control on from the start with this target, N (as the
+        /// program's force-control M-code will do).
+        #[arg(long, value_name = "N")]
+        force: Option<f64>,
+        /// Servo period in microseconds (250 to 10000).
+        #[arg(long, value_name = "US", default_value_t = 1000,
+              value_parser = clap::value_parser!(u32).range(250..=10000))]
+        period_us: u32,
     },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
@@ -97,6 +117,43 @@ enum Cmd {
     },
 }
 
+/// A program run offline on a machine (`plan`, `sim`).
+#[derive(clap::Args, Debug)]
+struct OfflineRun {
+    /// The program file.
+    file: PathBuf,
+    /// Machine: embedded name or TOML file.
+    #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
+    machine: String,
+    /// Write an SVG plot: the path, and position, joints, feed (plan) or
+    /// following error, feed, force and override (sim) against time.
+    #[arg(long, value_name = "OUT.svg")]
+    plot: Option<PathBuf>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum PlantArg {
+    /// Each joint sits on its command (no servo dynamics).
+    Ideal,
+    /// The seed's identified feed drive, driven by the position loop.
+    Identified,
+}
+
+#[derive(Subcommand, Debug)]
+enum ForceAction {
+    /// On, holding the cutting force at TARGET newtons (default: the
+    /// current or configured target).
+    On {
+        #[arg(value_name = "TARGET_N")]
+        target: Option<f64>,
+    },
+    /// Off: the controller's feed override returns to 100 %.
+    Off,
+}
+
 #[derive(Subcommand, Debug)]
 enum KinsDirection {
     /// Pose to joints: X Y Z, then the machine's other axes (A B ...; mm, degrees).
@@ -118,7 +175,11 @@ fn main() -> ExitCode {
         .clone()
         .unwrap_or_else(kerf::paths::default_socket);
     let result = match args.command {
-        Cmd::Status { json } => cli::status::status(&socket, json),
+        Cmd::Status { json, latency } => cli::status::status(&socket, json, latency),
+        Cmd::Force { action } => match action {
+            ForceAction::On { target } => cli::status::force(&socket, true, target),
+            ForceAction::Off => cli::status::force(&socket, false, None),
+        },
         Cmd::Run { file } => cli::run::run(&socket, &file),
         Cmd::Canon { file } => cli::canon::canon(&file),
         Cmd::Check {
@@ -127,10 +188,13 @@ fn main() -> ExitCode {
             json,
         } => cli::plan::check(&file, &machine, json),
         Cmd::Plan {
-            file,
-            machine,
-            plot,
-            json,
+            run:
+                OfflineRun {
+                    file,
+                    machine,
+                    plot,
+                    json,
+                },
             trapezoidal,
             segments,
         } => {
@@ -138,6 +202,38 @@ fn main() -> ExitCode {
                 cli::plan::segments(&file, &machine)
             } else {
                 cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal)
+            }
+        }
+        Cmd::Sim {
+            run:
+                OfflineRun {
+                    file,
+                    machine,
+                    plot,
+                    json,
+                },
+            no_feedforward,
+            plant,
+            force,
+            period_us,
+        } => {
+            if force.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
+                Err(Failure(
+                    cli::CANNOT_CONNECT,
+                    "--force takes a force in N above 0".into(),
+                ))
+            } else {
+                let options = kerf::simulate::SimOptions {
+                    period: period_us as f64 * 1e-6,
+                    feedforward: !no_feedforward,
+                    plant: Some(match plant {
+                        PlantArg::Ideal => kerf_io::sim::Plant::Ideal,
+                        PlantArg::Identified => kerf_io::sim::Plant::Identified,
+                    }),
+                    force_target: force,
+                    ..Default::default()
+                };
+                cli::sim::sim(&file, &machine, options, plot.as_deref(), json)
             }
         }
         Cmd::Kins {

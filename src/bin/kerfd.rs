@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use kerf::daemon::{bind_socket, Daemon, Options};
+use kerf::servo::{Pacing, RealTime};
 
 /// The kerf CNC controller daemon. With no arguments it runs the embedded
 /// simulated 3-axis mill `mill3`.
@@ -21,6 +22,21 @@ struct Args {
     /// Servo period in microseconds (250 to 10000).
     #[arg(long, value_name = "US", default_value_t = 1000)]
     period_us: u32,
+    /// Run the servo on a virtual clock: ticks back to back, each one
+    /// period of machine time, deterministic (for tests and simulation).
+    #[arg(long)]
+    virtual_clock: bool,
+    /// SCHED_FIFO priority of the servo thread (1-99).
+    #[arg(long, value_name = "N", default_value_t = 80,
+          value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: i32,
+    /// Pin the servo thread to this CPU.
+    #[arg(long, value_name = "CPU")]
+    servo_cpu: Option<usize>,
+    /// Do not ask for SCHED_FIFO or lock memory (the servo runs as an
+    /// ordinary thread; wake-ups will be later).
+    #[arg(long)]
+    no_realtime: bool,
 }
 
 fn main() -> ExitCode {
@@ -51,6 +67,15 @@ fn run(args: Args) -> anyhow::Result<()> {
     let mut daemon = Daemon::start(&Options {
         machine: args.machine,
         period_us: args.period_us,
+        pacing: if args.virtual_clock {
+            Pacing::Virtual
+        } else {
+            Pacing::Wall
+        },
+        realtime: (!args.no_realtime).then_some(RealTime {
+            fifo_priority: Some(args.rt_priority),
+            cpu: args.servo_cpu,
+        }),
     })?;
     let result = runtime.block_on(async {
         let listener = bind_socket(&socket)?;

@@ -7,6 +7,7 @@ pub mod canon;
 pub mod kins;
 pub mod plan;
 pub mod run;
+pub mod sim;
 pub mod status;
 pub mod workspace;
 
