@@ -56,7 +56,9 @@ pub fn sim(
             );
             match ch.settle {
                 Some(s) => println!(", settled in {s:.3} s"),
-                None if report.force.is_some() => println!(", did not settle"),
+                None if report.force.is_some() && ch.depth_to > 0.0 => {
+                    println!(", did not settle")
+                }
                 None => println!(),
             }
         }
