@@ -229,6 +229,32 @@ impl Differences {
     }
 }
 
+/// Plan a whole program at once: its segments in order, then a
+/// [`SegmentKind::Stop`] marker tagged `tag` where it ends. For tests and
+/// tools that queue a short program in one go.
+pub fn plan_program(
+    program: impl IntoIterator<Item = Result<Canon, InterpError>>,
+    kins: &dyn Kinematics,
+    start: Position,
+    config: PlannerConfig,
+    tag: u32,
+) -> Result<Vec<Segment>, RunError> {
+    let mut planner = Planner::new(kins, start, config);
+    let mut out = Vec::new();
+    for canon in program {
+        planner.plan(&canon?)?;
+        out.extend(std::iter::from_fn(|| planner.next_segment()));
+    }
+    planner.finish();
+    out.extend(std::iter::from_fn(|| planner.next_segment()));
+    out.push(Segment::marker(
+        SegmentKind::Stop { tag },
+        0,
+        planner.position(),
+    ));
+    Ok(out)
+}
+
 /// Run `program` (canon, in order) on `kins` from `start` with servo period
 /// `config.planner.period`, and measure it.
 pub fn run(
