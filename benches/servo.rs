@@ -215,9 +215,9 @@ fn tick_compute() {
     let machine = six_joints();
     // A zig-zag through all six axes, cutting 2 then 4 mm deep.
     let mut t = String::from("G21 G90\nG0 X0 Y10 A0 B0 C0\nG0 Z-2\nG1 F600\n");
-    for k in 1..=200 {
-        let x = k as f64 * 0.4;
-        let y = 10.0 + if k % 2 == 0 { 0.0 } else { 3.0 };
+    for k in 1..=100 {
+        let x = k as f64 * 0.8;
+        let y = 10.0 + if k % 2 == 0 { 0.0 } else { 1.0 };
         let w = (k % 7) as f64 * 0.2;
         t += &format!("X{x:.3} Y{y:.3} A{w:.3} B{:.3} C{:.3}\n", 2.0 * w, 3.0 * w);
     }

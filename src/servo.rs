@@ -450,7 +450,11 @@ impl ServoTick {
                 f.following_error[i] = cmd.position - fb.position;
             }
             f.line = snap.line;
-            f.feed_override = snap.feed_override;
+            // The feed override that acts: the operator's times the force
+            // controller's.
+            let force = snap.force.unwrap_or_default();
+            f.feed_override = snap.feed_override * snap.force.map_or(1.0, |c| c.feed_override);
+            f.force = force.force;
             f.fault = snap.fault.is_some() as u32;
             ex.shm.exchange(f, &mut ex.pins);
         }
