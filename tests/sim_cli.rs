@@ -70,6 +70,15 @@ fn json_reports_force_figures_with_control() {
     for key in ["max_n", "rms_error_pct", "settle_s"] {
         assert!(f[key].as_f64().is_some(), "{key}: {f}");
     }
+    // Force and override against time, one entry per spindle revolution
+    // (60 ms at 1000 rpm).
+    let trace = &f["trace"];
+    let times = trace["time_s"].as_array().unwrap();
+    let cycle = j["cycle_time_s"].as_f64().unwrap();
+    assert_eq!(times.len(), (cycle / 0.060) as usize, "{cycle}");
+    for key in ["force_n", "estimated_n", "feed_override"] {
+        assert_eq!(trace[key].as_array().unwrap().len(), times.len(), "{key}");
+    }
     let changes = j["cutting"]["depth_changes"].as_array().unwrap();
     assert_eq!(
         changes.len(),

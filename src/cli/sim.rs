@@ -104,9 +104,18 @@ pub fn to_json(report: &SimReport) -> Value {
             })).collect::<Vec<_>>(),
         })
     });
+    // With force control, the force and override of every controller step
+    // (one spindle revolution), as parallel arrays.
     let force = report.force.map(|f| {
+        let steps = &report.forces;
         json!({"target_n": f.target, "max_n": f.max, "rms_error_pct": f.rms_error_pct,
-               "settle_s": f.settle})
+        "settle_s": f.settle,
+        "trace": {
+            "time_s": steps.iter().map(|s| s.time).collect::<Vec<_>>(),
+            "force_n": steps.iter().map(|s| s.force).collect::<Vec<_>>(),
+            "estimated_n": steps.iter().map(|s| s.estimated).collect::<Vec<_>>(),
+            "feed_override": steps.iter().map(|s| s.feed_override).collect::<Vec<_>>(),
+        }})
     });
     let us = |ns: u64| ns as f64 / 1000.0;
     let t = &report.tick_time;
