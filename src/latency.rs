@@ -19,10 +19,15 @@ const BUCKETS: usize = FINE + COARSE + 1;
 pub struct LatencyStats {
     /// Wake-ups measured.
     pub samples: u64,
+    /// Smallest, exact.
     pub min_ns: u64,
+    /// 50th percentile (upper edge of its bucket).
     pub median_ns: u64,
+    /// 99th percentile.
     pub p99_ns: u64,
+    /// 99.9th percentile.
     pub p999_ns: u64,
+    /// Largest, exact.
     pub max_ns: u64,
 }
 

@@ -143,10 +143,15 @@ pub struct ServoStatus {
 pub struct Latency {
     /// Wake-ups measured (0 on a virtual clock).
     pub samples: u64,
+    /// Earliest wake-up.
     pub min_us: f64,
+    /// Median (to 1 µs below 1 ms).
     pub median_us: f64,
+    /// 99th percentile.
     pub p99_us: f64,
+    /// 99.9th percentile.
     pub p999_us: f64,
+    /// Latest wake-up.
     pub max_us: f64,
 }
 

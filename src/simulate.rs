@@ -61,6 +61,7 @@ impl Default for SimOptions {
 /// Following error of one joint.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct JointFigures {
+    /// Joint name.
     pub name: String,
     /// Largest |commanded − measured|, joint units (mm).
     pub max_following_error: f64,
@@ -74,8 +75,9 @@ pub struct JointFigures {
 pub struct DepthChange {
     /// When the tool axis crossed it, s.
     pub time: f64,
-    /// Depth of cut before and after, mm.
+    /// Depth of cut before, mm.
     pub depth_from: f64,
+    /// Depth of cut after, mm.
     pub depth_to: f64,
     /// Largest force of the last controller step before it, N.
     pub force_before: f64,
@@ -94,6 +96,7 @@ pub struct CuttingFigures {
     pub max_force: f64,
     /// Time spent cutting, s.
     pub cutting_time: f64,
+    /// Every sudden change of the depth of cut, in order.
     pub changes: Vec<DepthChange>,
 }
 
@@ -114,11 +117,13 @@ pub struct ForceFigures {
 /// One period of the run, for plots.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TracePoint {
+    /// End of the period, s.
     pub time: f64,
     /// Commanded tool position XYZ, mm.
     pub commanded: [f64; 3],
     /// Measured tool position XYZ, mm.
     pub actual: [f64; 3],
+    /// Commanded minus measured per joint, mm.
     pub following_error: [f64; MAX_JOINTS],
     /// Path speed commanded, mm/s.
     pub velocity: f64,
@@ -144,16 +149,20 @@ pub struct ForcePoint {
 pub struct SimReport {
     /// Time from start until the executor finished the program, s.
     pub cycle_time: f64,
+    /// Following error per joint, in joint order.
     pub joints: Vec<JointFigures>,
     /// Largest following error of any joint, mm.
     pub max_following_error: f64,
     /// Largest distance of the measured tool tip from the programmed
     /// moves, mm.
     pub max_contour_error: f64,
+    /// The cutting process, when the machine simulates one.
     pub cutting: Option<CuttingFigures>,
+    /// Force control figures, when it was on.
     pub force: Option<ForceFigures>,
     /// Wall-clock compute time of each tick, ns (reported, never asserted).
     pub tick_time: LatencyStats,
+    /// Servo periods run.
     pub ticks: u64,
     /// Every period (with `record`).
     pub trace: Vec<TracePoint>,

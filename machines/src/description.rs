@@ -166,11 +166,17 @@ impl SpindleToml {
 pub struct ForceControlToml {
     /// Target force F_d at start-up, N; off at start-up when absent.
     pub target: Option<f64>,
+    /// [`FuzzyConfig::gain_e`].
     pub gain_e: Option<f64>,
+    /// [`FuzzyConfig::gain_ce`].
     pub gain_ce: Option<f64>,
+    /// [`FuzzyConfig::gain_out`].
     pub gain_out: Option<f64>,
+    /// [`FuzzyConfig::min_override`].
     pub min_override: Option<f64>,
+    /// [`FuzzyConfig::max_override`].
     pub max_override: Option<f64>,
+    /// [`FuzzyConfig::engage`].
     pub engage: Option<f64>,
 }
 

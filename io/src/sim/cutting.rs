@@ -73,9 +73,10 @@ pub struct CuttingConfig {
     pub joints: [usize; 3],
     /// Z of the stock top before the first step, mm.
     pub stock_top: f64,
-    /// Stock extent along X, mm; unbounded where not given.
+    /// Where the stock starts along X, mm; unbounded when not given.
     #[serde(default)]
     pub x_min: Option<f64>,
+    /// Where the stock ends along X, mm; unbounded when not given.
     #[serde(default)]
     pub x_max: Option<f64>,
     /// Steps in the stock top along X, in increasing `x`.
