@@ -1,6 +1,8 @@
 //! `kerf sim`: run a program on the simulated machine on a virtual clock
 //! and report following, contour and force figures.
 
+use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::Path;
 
 use kerf_interp::Interpreter;
@@ -30,41 +32,72 @@ pub fn sim(
     if let Some(out) = plot {
         write_plot(out, &report).map_err(|e| Failure::new(format!("{}: {e}", out.display())))?;
     }
-    if json_out {
-        println!("{}", to_json(&report));
-        return Ok(());
+    let text = if json_out {
+        format!("{}\n", to_json(&report))
+    } else {
+        summary(&machine.description.name, &report)
+    };
+    // A reader that stops early (`| head`) is not an error.
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(Failure::new(format!("cannot write the report: {e}")))
+        }
+        _ => Ok(()),
     }
-    println!("machine              {}", machine.description.name);
-    println!("cycle time           {:.3} s", report.cycle_time);
-    println!("max following error  {:.6} mm", report.max_following_error);
-    println!("max contour error    {:.6} mm", report.max_contour_error);
+}
+
+/// The report as a person reads it.
+fn summary(machine: &str, report: &SimReport) -> String {
+    let mut out = String::new();
+    // Writing into a String cannot fail.
+    macro_rules! putln {
+        ($($arg:tt)*) => {{ let _ = writeln!(out, $($arg)*); }};
+    }
+    macro_rules! put {
+        ($($arg:tt)*) => {{ let _ = write!(out, $($arg)*); }};
+    }
+    putln!("machine              {}", machine);
+    putln!("cycle time           {:.3} s", report.cycle_time);
+    putln!("max following error  {:.6} mm", report.max_following_error);
+    putln!("max contour error    {:.6} mm", report.max_contour_error);
     for j in &report.joints {
-        println!(
+        putln!(
             "  joint {:<6} max {:.6} mm  rms {:.6} mm",
-            j.name, j.max_following_error, j.rms_following_error
+            j.name,
+            j.max_following_error,
+            j.rms_following_error
         );
     }
     if let Some(c) = &report.cutting {
-        println!(
+        putln!(
             "max cutting force    {:.1} N ({:.3} s cutting)",
-            c.max_force, c.cutting_time
+            c.max_force,
+            c.cutting_time
         );
         for ch in &c.changes {
-            print!(
+            put!(
                 "  depth {:.2} → {:.2} mm at {:.3} s: force {:.1} → {:.1} N",
-                ch.depth_from, ch.depth_to, ch.time, ch.force_before, ch.force_after
+                ch.depth_from,
+                ch.depth_to,
+                ch.time,
+                ch.force_before,
+                ch.force_after
             );
             match ch.settle {
-                Some(s) => println!(", settled in {s:.3} s"),
+                Some(s) => putln!(", settled in {s:.3} s"),
                 None if report.force.is_some() && ch.depth_to > 0.0 => {
-                    println!(", did not settle")
+                    putln!(", did not settle")
                 }
-                None => println!(),
+                None => putln!(),
             }
         }
     }
     if let Some(f) = &report.force {
-        println!(
+        putln!(
             "force control        target {:.1} N, max {:.1} N, rms error after settling {}, settle {}",
             f.target,
             f.max,
@@ -73,14 +106,14 @@ pub fn sim(
         );
     }
     let t = &report.tick_time;
-    println!(
+    putln!(
         "tick compute         median {:.1} µs, p99 {:.1} µs, max {:.1} µs ({} ticks)",
         t.median_ns as f64 / 1000.0,
         t.p99_ns as f64 / 1000.0,
         t.max_ns as f64 / 1000.0,
         report.ticks
     );
-    Ok(())
+    out
 }
 
 /// The report as JSON: the keys `kerf sim --json` promises, and more.
