@@ -751,3 +751,30 @@ fn sleep_until_ns(deadline: i64) {
         );
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refused_real_time_settings_are_warned_about_not_fatal() {
+        // No machine has CPU 1000 (CPU_SETSIZE is 1024) nor 5000.
+        for cpu in [1000, 5000] {
+            let report = std::thread::spawn(move || {
+                apply_realtime(RealTime {
+                    fifo_priority: None,
+                    cpu: Some(cpu),
+                })
+            })
+            .join()
+            .unwrap();
+            assert_eq!(report.cpu, None);
+            assert!(!report.fifo);
+            assert_eq!(report.warnings.len(), 1, "{report:?}");
+            assert!(
+                report.warnings[0].contains(&format!("cannot pin the servo thread to CPU {cpu}")),
+                "{report:?}"
+            );
+        }
+    }
+}
