@@ -25,17 +25,17 @@ use tokio::sync::{broadcast, mpsc};
 
 use crate::machine::{Control, JobKind, Program, Refusal};
 use crate::protocol::{
-    self, Command, ErrorCode, Event, Fields, JointRef, MachineState, Overrides, ServerLine,
-    ServoStatus, Status, PROTOCOL_VERSION,
+    self, Command, ErrorCode, Event, Fields, ForceStatus, JointRef, Latency, MachineState,
+    Overrides, ServerLine, ServoStatus, Status, PROTOCOL_VERSION,
 };
 use crate::seqlock::{seqlock, Reader};
-use crate::servo::{ServoCommand, ServoThread, ServoTick, Snapshot, LATENCY_BOUNDS_NS};
+use crate::servo::{self, Pacing, RealTime, ServoCommand, ServoThread, ServoTick, Snapshot};
 use crate::state::{Parameters, Store, Tool, COORDINATE_SYSTEMS};
 
 /// Segments the planner may run ahead of the servo: the executor looks
 /// ahead over all of them (at least 2000 segments, and 0.5 s of motion even
 /// for 0.02 mm segments at 2 m/min).
-const QUEUE_CAPACITY: usize = 8192;
+pub const QUEUE_CAPACITY: usize = 8192;
 
 /// How often the daemon looks at the servo for faults, ended jobs, lines
 /// and messages, and so the longest delay of a state event.
@@ -48,11 +48,11 @@ pub struct Options {
     pub machine: String,
     /// Servo period, µs (250 to 10000).
     pub period_us: u32,
-    /// `SCHED_FIFO` priority of the servo thread, 1 to 99; 0 leaves it at
-    /// normal priority.
-    pub priority: u8,
-    /// CPU to pin the servo thread to.
-    pub cpu: Option<usize>,
+    /// Wall-clock or virtual-clock servo.
+    pub pacing: Pacing,
+    /// Real-time settings of the servo thread (with a wall clock); `None`:
+    /// ordinary scheduling and no memory locking.
+    pub realtime: Option<RealTime>,
     /// Where the parameter file and tool table live.
     pub state_dir: PathBuf,
     /// Bearer token TCP clients must present with `auth` (none: TCP needs
@@ -94,6 +94,11 @@ struct Shared {
     store: Mutex<Store>,
     tcp_token: Option<String>,
     next_client: AtomicU64,
+    pacing: Pacing,
+    memory_locked: bool,
+    realtime: servo::RealTimeReport,
+    /// The machine's `[force_control]` target, if it has the table.
+    force_control: Option<Option<f64>>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -138,6 +143,7 @@ impl Daemon {
         let home_pose = kinematics
             .forward(&home_joints, &start)
             .map_err(|e| anyhow::anyhow!("{origin}: the home pose is not reachable: {e}"))?;
+        servo::check_cutting(&hal_config, &*kinematics).with_context(|| origin.clone())?;
         let hal = kerf_io::build(&hal_config, &joints).with_context(|| origin.clone())?;
         let (producer, consumer) = rtrb::RingBuffer::new(QUEUE_CAPACITY);
         let (commands, command_queue) = rtrb::RingBuffer::new(64);
@@ -150,6 +156,7 @@ impl Daemon {
             consumer,
             command_queue,
         )?;
+        tick.configure(&description);
         if let Some(shm) = &hal_config.shm {
             let instance = shm
                 .instance
@@ -167,10 +174,34 @@ impl Daemon {
             .collect();
         tick.set_following_error_limits(&limits);
         let (writer, reader) = seqlock(*tick.snapshot());
-        let servo = ServoThread::spawn(tick, writer, options.priority, options.cpu)
+        let realtime = match options.pacing {
+            Pacing::Wall => options.realtime,
+            Pacing::Virtual => None,
+        };
+        let memory_locked = match realtime.map(|_| servo::lock_memory()) {
+            Some(Ok(())) => true,
+            Some(Err(why)) => {
+                tracing::warn!("{why}");
+                false
+            }
+            None => false,
+        };
+        let servo = ServoThread::spawn(tick, writer, options.pacing, realtime.unwrap_or_default())
             .context("cannot start the servo thread")?;
-        tracing::info!(machine = %description.name, %origin, period_us = options.period_us,
-            state_dir = %options.state_dir.display(), "servo running");
+        for warning in &servo.realtime().warnings {
+            tracing::warn!("{warning}");
+        }
+        tracing::info!(
+            machine = %description.name,
+            %origin,
+            period_us = options.period_us,
+            state_dir = %options.state_dir.display(),
+            clock = ?options.pacing,
+            sched_fifo = servo.realtime().fifo,
+            memory_locked,
+            "servo running"
+        );
+        let realtime = servo.realtime().clone();
         let joint_names = kinematics.joints().iter().map(|j| j.name.clone()).collect();
         Ok(Daemon {
             shared: Arc::new(Shared {
@@ -194,6 +225,10 @@ impl Daemon {
                 store: Mutex::new(store),
                 tcp_token: options.tcp_token.clone(),
                 next_client: AtomicU64::new(1),
+                pacing: options.pacing,
+                memory_locked,
+                realtime,
+                force_control: description.force_control.map(|f| f.target),
             }),
             servo,
         })
@@ -423,12 +458,6 @@ impl Shared {
         let snap = self.status.read();
         let (state, execution) = control.state();
         let program = control.program().map(|p| p.status.clone());
-        let histogram = LATENCY_BOUNDS_NS
-            .iter()
-            .map(|b| Some(*b as f64 / 1000.0))
-            .chain([None])
-            .zip(snap.latency_histogram)
-            .collect();
         Status {
             machine: self.machine.clone(),
             state,
@@ -446,12 +475,37 @@ impl Shared {
             job: control.job_status().cloned(),
             program,
             fault: control.fault().map(str::to_string),
+            following_error: snap.following_error[..snap.joint_count].to_vec(),
+            force: snap.force.map(|f| ForceStatus {
+                enabled: f.target.is_some(),
+                target_n: f.target,
+                force_n: f.force,
+                feed_override: f.feed_override,
+            }),
             servo: ServoStatus {
                 period_us: self.period_us,
                 ticks: snap.ticks,
                 overruns: snap.overruns,
-                latency_max_us: snap.latency_max_ns as f64 / 1000.0,
-                latency_histogram: histogram,
+                clock: match self.pacing {
+                    Pacing::Wall => "wall",
+                    Pacing::Virtual => "virtual",
+                }
+                .into(),
+                sched_fifo: self.realtime.fifo,
+                memory_locked: self.memory_locked,
+                cpu: self.realtime.cpu,
+                latency: {
+                    let l = snap.latency;
+                    let us = |ns: u64| ns as f64 / 1000.0;
+                    Latency {
+                        samples: l.samples,
+                        min_us: us(l.min_ns),
+                        median_us: us(l.median_ns),
+                        p99_us: us(l.p99_ns),
+                        p999_us: us(l.p999_ns),
+                        max_us: us(l.max_ns),
+                    }
+                },
             },
         }
     }
@@ -514,6 +568,41 @@ impl Shared {
                     ),
                 )
             })
+    }
+
+    /// `force_control`: turn the force controller on or off.
+    fn force_control(&self, enabled: bool, target_n: Option<f64>) -> Result<Value, Refusal> {
+        let Some(configured) = self.force_control else {
+            return Err((
+                ErrorCode::InvalidArgument,
+                format!(
+                    "machine {} has no force controller: add [spindle] and [force_control] to its description",
+                    self.machine
+                ),
+            ));
+        };
+        let target = if enabled {
+            let current = self.status.read().force.and_then(|f| f.target);
+            match target_n.or(current).or(configured) {
+                Some(t) if t.is_finite() && t > 0.0 => Some(t),
+                Some(t) => {
+                    return Err((
+                        ErrorCode::InvalidArgument,
+                        format!("target_n {t} is not a usable force: give newtons > 0"),
+                    ))
+                }
+                None => {
+                    return Err((
+                        ErrorCode::InvalidArgument,
+                        "no target force: give target_n (N)".into(),
+                    ))
+                }
+            }
+        } else {
+            None
+        };
+        self.send(ServoCommand::ForceControl(target))?;
+        Ok(json!({"enabled": enabled, "target_n": target}))
     }
 }
 
@@ -706,6 +795,7 @@ async fn handle(
             conn.unsubscribe().await;
             Ok(json!({}))
         }
+        Command::ForceControl { enabled, target_n } => shared.force_control(enabled, target_n),
         Command::Estop => {
             shared.observe().estop();
             shared.send(ServoCommand::Enable(false))?;

@@ -145,10 +145,17 @@ pub enum Command {
     },
     /// Remove a tool from the table.
     RemoveTool { tool: u32 },
+    /// Cutting-force control on (with target force `target_n`, N, or the
+    /// machine's configured target) or off.
+    ForceControl {
+        enabled: bool,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        target_n: Option<f64>,
+    },
 }
 
 /// Every command name, as sent in `cmd`.
-pub const COMMANDS: [&str; 25] = [
+pub const COMMANDS: [&str; 26] = [
     "hello",
     "auth",
     "status",
@@ -174,6 +181,7 @@ pub const COMMANDS: [&str; 25] = [
     "tools",
     "set_tool",
     "remove_tool",
+    "force_control",
 ];
 
 /// Error codes carried in error replies.
@@ -354,11 +362,48 @@ pub struct ServoStatus {
     pub ticks: u64,
     /// Wake-ups a whole period or more late.
     pub overruns: u64,
-    /// Latest wake-up after the deadline, µs.
-    pub latency_max_us: f64,
-    /// Wake-ups by lateness: `[bound_us, count]` pairs, the last bound
-    /// `null` (everything later).
-    pub latency_histogram: Vec<(Option<f64>, u64)>,
+    /// `wall` (real time) or `virtual` (`kerfd --virtual-clock`).
+    pub clock: String,
+    /// Running under SCHED_FIFO.
+    pub sched_fifo: bool,
+    /// The process's memory is locked (mlockall).
+    pub memory_locked: bool,
+    /// CPU the servo thread is pinned to.
+    pub cpu: Option<usize>,
+    /// How late the servo thread woke after its deadlines, µs.
+    pub latency: Latency,
+}
+
+/// Wake-up latency figures, µs.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
+pub struct Latency {
+    /// Wake-ups measured (0 on a virtual clock).
+    pub samples: u64,
+    /// Earliest wake-up.
+    pub min_us: f64,
+    /// Median (to 1 µs below 1 ms).
+    pub median_us: f64,
+    /// 99th percentile.
+    pub p99_us: f64,
+    /// 99.9th percentile.
+    pub p999_us: f64,
+    /// Latest wake-up.
+    pub max_us: f64,
+}
+
+/// The cutting-force controller's state.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+pub struct ForceStatus {
+    /// Force control is on.
+    pub enabled: bool,
+    /// Target force F_d, N (null while off).
+    pub target_n: Option<f64>,
+    /// Largest force of the last spindle revolution, from the spindle
+    /// current, N.
+    pub force_n: f64,
+    /// Feed override the controller sets (1 while off); the feed is
+    /// programmed × operator override × this.
+    pub feed_override: f64,
 }
 
 /// A status snapshot.
@@ -391,6 +436,10 @@ pub struct Status {
     pub program: Option<ProgramStatus>,
     /// Why motion stopped, in fault state.
     pub fault: Option<String>,
+    /// Commanded minus measured position per joint, joint units (mm).
+    pub following_error: Vec<f64>,
+    /// The cutting-force controller; null on machines without one.
+    pub force: Option<ForceStatus>,
     pub servo: ServoStatus,
 }
 

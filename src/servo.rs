@@ -15,8 +15,12 @@ use std::time::Duration;
 use kerf_interp::Position;
 use kerf_io::shm::{self, ShmExport, StatusFrame};
 use kerf_io::{Feedback, Hal, HalFault, PinBank, Setpoints};
+use kerf_machines::Description;
+use kerf_motion::control::{JointLoops, LoopGains};
+use kerf_motion::fuzzy::{self, ForceControl};
 use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, SegmentKind, MAX_JOINTS};
 
+use crate::latency::{LatencyHistogram, LatencyStats};
 use crate::seqlock::Writer;
 
 const _: () = assert!(MAX_JOINTS == kerf_io::MAX_JOINTS);
@@ -45,6 +49,9 @@ pub enum ServoCommand {
     Enable(bool),
     /// Forget a latched fault. The drives stay off until `Enable(true)`.
     ClearFault,
+    /// Cutting-force control on with this target force (N), or off. Ignored
+    /// by a machine without `[force_control]`.
+    ForceControl(Option<f64>),
 }
 
 /// Why the servo stopped motion. `Copy`, so it fits in the snapshot.
@@ -90,10 +97,18 @@ impl ServoFault {
     }
 }
 
-/// Upper bounds of the wake-up latency histogram buckets, ns; the last
-/// bucket counts everything later than the last bound.
-pub const LATENCY_BOUNDS_NS: [u64; 7] =
-    [10_000, 20_000, 50_000, 100_000, 200_000, 500_000, 1_000_000];
+/// The cutting-force controller as the snapshot shows it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ForceStatus {
+    /// Target force F_d, N, while on.
+    pub target: Option<f64>,
+    /// Largest force of the last controller step, estimated from the
+    /// spindle current, N.
+    pub force: f64,
+    /// Feed override the controller asks for (1 while off); it multiplies
+    /// the operator's feed override.
+    pub feed_override: f64,
+}
 
 /// What the servo thread publishes every tick.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -133,11 +148,13 @@ pub struct Snapshot {
     /// Queue items taken off the queue since start, run or discarded; the
     /// producer counts what it pushes, so it can tell when an item is done.
     pub consumed: u64,
-    /// Latest wake-up of the servo thread after its deadline, ns.
-    pub latency_max_ns: u64,
-    /// Wake-ups by lateness: bucket `i` counts those up to
-    /// [`LATENCY_BOUNDS_NS`]`[i]`, the last bucket the rest.
-    pub latency_histogram: [u64; LATENCY_BOUNDS_NS.len() + 1],
+    /// Commanded minus measured position per joint at the end of the
+    /// last period, mm; the first `joint_count` are used.
+    pub following_error: [f64; MAX_JOINTS],
+    /// The cutting-force controller, if the machine has one.
+    pub force: Option<ForceStatus>,
+    /// Wake-up latency of the servo thread (zero on a virtual clock).
+    pub latency: LatencyStats,
 }
 
 impl Snapshot {
@@ -164,8 +181,9 @@ impl Snapshot {
             enabled: false,
             single_block: false,
             consumed: 0,
-            latency_max_ns: 0,
-            latency_histogram: [0; LATENCY_BOUNDS_NS.len() + 1],
+            following_error: [0.0; MAX_JOINTS],
+            force: None,
+            latency: LatencyStats::default(),
         }
     }
 }
@@ -195,6 +213,14 @@ pub struct ServoTick {
     feedback: Feedback,
     snapshot: Snapshot,
     export: Option<Box<Export>>,
+    /// Position loops of the joints (their output drives plants that take
+    /// an effort; position drives ignore it).
+    loops: JointLoops,
+    /// Spindle speed while enabled, rpm.
+    spindle_rpm: f64,
+    force: Option<ForceControl>,
+    /// Force control as the running program last set it.
+    program_force: Option<f64>,
 }
 
 impl ServoTick {
@@ -212,8 +238,15 @@ impl ServoTick {
         let mut joints = [0.0; MAX_JOINTS];
         kins.inverse(&start, &mut joints[..n])?;
         let mut setpoints = Setpoints::default();
-        for (cmd, q) in setpoints.joints.iter_mut().zip(&joints[..n]) {
+        let mut feedback = Feedback::default();
+        for ((cmd, fb), q) in setpoints
+            .joints
+            .iter_mut()
+            .zip(feedback.joints.iter_mut())
+            .zip(&joints[..n])
+        {
             cmd.position = *q;
+            fb.position = *q;
         }
         Ok(ServoTick {
             period,
@@ -226,10 +259,90 @@ impl ServoTick {
             enabled: false,
             following_limits: [f64::INFINITY; MAX_JOINTS],
             setpoints,
-            feedback: Feedback::default(),
+            feedback,
             snapshot: Snapshot::at_rest(start, &joints[..n]),
             export: None,
+            loops: JointLoops::new(&[LoopGains::SEED; MAX_JOINTS][..n], &joints[..n]),
+            spindle_rpm: 0.0,
+            force: None,
+            program_force: None,
         })
+    }
+
+    /// Take the servo settings of a machine description: each joint's loop
+    /// gains and following-error limit, the spindle speed, and the force
+    /// controller.
+    pub fn configure(&mut self, machine: &Description) {
+        let n = self.snapshot.joint_count;
+        let gains: Vec<LoopGains> = machine.joints.iter().map(|j| j.loop_gains()).collect();
+        self.loops = JointLoops::new(&gains[..n], &self.snapshot.joints[..n]);
+        let limits: Vec<Option<f64>> = machine.joints.iter().map(|j| j.following_error).collect();
+        self.set_following_error_limits(&limits);
+        self.spindle_rpm = machine.spindle.map_or(0.0, |s| s.rpm);
+        self.force = match (&machine.spindle, &machine.force_control) {
+            (Some(spindle), Some(fc)) => {
+                let mut control = ForceControl::new(
+                    fc.config(),
+                    spindle.sensor(),
+                    fuzzy::ticks_per_step(spindle.rpm, self.period),
+                );
+                control.set_target(fc.target);
+                Some(control)
+            }
+            _ => None,
+        };
+        self.publish_force();
+    }
+
+    /// Fault when a joint's feedback is further than `limits[j]` (mm) from
+    /// its command; `None` (or a missing entry) leaves the joint unchecked.
+    pub fn set_following_error_limits(&mut self, limits: &[Option<f64>]) {
+        for (slot, limit) in self.following_limits.iter_mut().zip(limits) {
+            *slot = limit.unwrap_or(f64::INFINITY);
+        }
+    }
+
+    /// Velocity and acceleration feedforward on (default) or off (the
+    /// seed's pure PD).
+    pub fn set_feedforward(&mut self, on: bool) {
+        self.loops.set_feedforward(on);
+    }
+
+    /// This period's setpoints, as sent to the HAL.
+    pub fn setpoints(&self) -> &Setpoints {
+        &self.setpoints
+    }
+
+    /// The HAL's feedback from the last period.
+    pub fn feedback(&self) -> &Feedback {
+        &self.feedback
+    }
+
+    /// The force controller's state into the snapshot.
+    fn publish_force(&mut self) {
+        self.snapshot.force = self.force.as_ref().map(|fc| ForceStatus {
+            target: fc.target(),
+            force: fc.last_step().force,
+            feed_override: fc.feed_override(),
+        });
+    }
+
+    /// True once everything the executor needs ahead is queued: the queue
+    /// is empty, full, or holds a `Stop` marker (the rest of a program).
+    /// A servo on a virtual clock waits for this before each tick, so a
+    /// run does not depend on how fast the planner thread is.
+    pub fn input_complete(&mut self) -> bool {
+        let slots = self.queue.slots();
+        if slots == 0 || slots == self.queue.buffer().capacity() {
+            return true;
+        }
+        let Ok(chunk) = self.queue.read_chunk(slots) else {
+            return true;
+        };
+        let (head, tail) = chunk.as_slices();
+        head.iter()
+            .chain(tail)
+            .any(|s| matches!(s.kind, SegmentKind::Stop { .. }))
     }
 
     /// Publish the status and `pins` through `shm` every tick from now on.
@@ -249,14 +362,6 @@ impl ServoTick {
     /// The last published snapshot.
     pub fn snapshot(&self) -> &Snapshot {
         &self.snapshot
-    }
-
-    /// Fault when a joint's feedback is further than `limits[j]` (mm) from
-    /// its command; `None` (or a missing entry) leaves the joint unchecked.
-    pub fn set_following_error_limits(&mut self, limits: &[Option<f64>]) {
-        for (slot, limit) in self.following_limits.iter_mut().zip(limits) {
-            *slot = limit.unwrap_or(f64::INFINITY);
-        }
     }
 
     fn command(&mut self, cmd: ServoCommand) {
@@ -300,6 +405,11 @@ impl ServoTick {
             }
             ServoCommand::Enable(false) => self.enabled = false,
             ServoCommand::ClearFault => self.snapshot.fault = None,
+            ServoCommand::ForceControl(target) => {
+                if let Some(fc) = &mut self.force {
+                    fc.set_target(target);
+                }
+            }
         }
     }
 
@@ -340,6 +450,8 @@ impl ServoTick {
         snap.rapid_override = self.executor.rapid_override();
         // A fault or e-stop disables the drives: they hold where they are.
         self.setpoints.enable = active && snap.fault.is_none();
+        self.inner_loop(n);
+        let snap = &mut self.snapshot;
         if let Err(e) = self
             .hal
             .exchange(self.period, &self.setpoints, &mut self.feedback)
@@ -348,10 +460,11 @@ impl ServoTick {
         }
         for i in 0..n {
             snap.joints[i] = self.feedback.joints[i].position;
+            snap.following_error[i] = self.setpoints.joints[i].position - snap.joints[i];
         }
         if self.setpoints.enable && snap.fault.is_none() {
             for i in 0..n {
-                let error = self.setpoints.joints[i].position - snap.joints[i];
+                let error = snap.following_error[i];
                 if error.abs() > self.following_limits[i] {
                     snap.fault = Some(ServoFault::FollowingError {
                         joint: i,
@@ -362,6 +475,12 @@ impl ServoTick {
                 }
             }
         }
+        if let Some(fc) = &mut self.force {
+            fc.tick(self.feedback.spindle_current);
+            self.executor.set_feed_scale(fc.feed_override());
+        }
+        self.publish_force();
+        let snap = &mut self.snapshot;
         match self.kins.forward(&snap.joints[..n], &snap.position) {
             Ok(p) => snap.position = p,
             Err(e) => {
@@ -397,7 +516,11 @@ impl ServoTick {
                 f.following_error[i] = cmd.position - fb.position;
             }
             f.line = snap.line;
-            f.feed_override = snap.feed_override;
+            // The feed override that acts: the operator's times the force
+            // controller's.
+            let force = snap.force.unwrap_or_default();
+            f.feed_override = snap.feed_override * snap.force.map_or(1.0, |c| c.feed_override);
+            f.force = force.force;
             f.fault = snap.fault.is_some() as u32;
             ex.shm.exchange(f, &mut ex.pins);
         }
@@ -432,6 +555,18 @@ impl ServoTick {
             .expect("slots() items are readable");
         let (head, tail) = chunk.as_slices();
         let sample = self.executor.tick(self.period, head, tail);
+        // The program's force control changes when a segment that asks for
+        // something else starts.
+        let current = match head.get(sample.consumed) {
+            Some(seg) => Some(seg),
+            None => tail.get(sample.consumed - head.len()),
+        };
+        if let (Some(seg), Some(fc)) = (current.filter(|s| s.is_motion()), &mut self.force) {
+            if seg.force_control != self.program_force {
+                self.program_force = seg.force_control;
+                fc.set_target(seg.force_control);
+            }
+        }
         chunk.commit(sample.consumed);
         snap.consumed += sample.consumed as u64;
         if let Some(tag) = sample.stopped_at {
@@ -454,85 +589,217 @@ impl ServoTick {
     }
 }
 
+impl ServoTick {
+    /// The drive inputs for the coming period: each joint's loop from its
+    /// setpoint for the end of the period and its position measured now.
+    /// With the drives off the loops rest where the joints are.
+    fn inner_loop(&mut self, n: usize) {
+        let mut next = [0.0; MAX_JOINTS];
+        let mut measured = [0.0; MAX_JOINTS];
+        for i in 0..n {
+            next[i] = self.setpoints.joints[i].position;
+            measured[i] = self.feedback.joints[i].position;
+        }
+        let mut effort = [0.0; MAX_JOINTS];
+        if self.setpoints.enable {
+            self.loops
+                .update(&next[..n], &measured[..n], self.period, &mut effort[..n]);
+            self.setpoints.spindle_speed = self.spindle_rpm;
+        } else {
+            self.loops.reset(&measured[..n]);
+            self.setpoints.spindle_speed = 0.0;
+        }
+        for (cmd, e) in self.setpoints.joints.iter_mut().zip(&effort[..n]) {
+            cmd.effort = *e;
+        }
+    }
+}
+
+/// Check that a simulated cutting process reads the tool tip from joints
+/// that drive X, Y and Z directly (it works on joint positions).
+pub fn check_cutting(
+    hal: &kerf_io::HalConfig,
+    kins: &dyn Kinematics,
+) -> Result<(), kerf_io::HalConfigError> {
+    use kerf_interp::Axis;
+    let Some(cutting) = &hal.sim.cutting else {
+        return Ok(());
+    };
+    for (&joint, axis) in cutting.joints.iter().zip([Axis::X, Axis::Y, Axis::Z]) {
+        if kins.joint_axis(joint) != Some(axis) {
+            let name = kins.joints().get(joint).map_or("?", |j| j.name.as_str());
+            return Err(kerf_io::HalConfigError::key(
+                "sim.cutting.joints",
+                format!(
+                    "joint {joint} ({name}) does not drive axis {axis} directly; \
+                     the simulated cutting process needs joints that do"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// How the servo thread keeps time.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Pacing {
+    /// One tick per period of the wall clock (`CLOCK_MONOTONIC`).
+    #[default]
+    Wall,
+    /// Ticks back to back on a virtual clock that advances one period per
+    /// tick: deterministic and as fast as the CPU allows. Before each tick
+    /// the thread waits until the planner has queued what the executor
+    /// needs ahead ([`ServoTick::input_complete`]); while idle it sleeps
+    /// 1 ms of wall time between ticks rather than spin.
+    Virtual,
+}
+
+/// Real-time settings of the servo thread.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RealTime {
+    /// Try SCHED_FIFO at this priority (1–99); `None`: normal scheduling.
+    pub fifo_priority: Option<i32>,
+    /// Pin the servo thread to this CPU.
+    pub cpu: Option<usize>,
+}
+
+/// What the servo thread got of what [`RealTime`] asked for.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct RealTimeReport {
+    /// Running under SCHED_FIFO.
+    pub fifo: bool,
+    /// Pinned to this CPU.
+    pub cpu: Option<usize>,
+    /// Why something asked for was not granted, one line each.
+    pub warnings: Vec<String>,
+}
+
+/// Lock all of the process's memory now and in future, so the servo never
+/// waits for a page fault. Returns why not where the OS refuses (the
+/// process needs CAP_IPC_LOCK or a large enough RLIMIT_MEMLOCK).
+pub fn lock_memory() -> Result<(), String> {
+    // With a finite memory-lock limit, MCL_FUTURE would make allocations
+    // past it fail later, which is worse than page faults: lock only where
+    // the limit is unlimited, or as root.
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: valid pointer to an rlimit.
+    let unlimited = unsafe { libc::getrlimit(libc::RLIMIT_MEMLOCK, &mut limit) } == 0
+        && limit.rlim_cur == libc::RLIM_INFINITY;
+    // SAFETY: no arguments.
+    let root = unsafe { libc::geteuid() } == 0;
+    if !unlimited && !root {
+        return Err(
+            "not locking memory: the memory-lock limit is finite (LimitMEMLOCK=infinity \
+                    in the unit, or `ulimit -l unlimited`); page faults may delay the servo"
+                .into(),
+        );
+    }
+    // SAFETY: plain system call with flag arguments.
+    let r = unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "mlockall failed ({}): memory is not locked, so a page fault can delay a servo tick \
+             (needs CAP_IPC_LOCK or `ulimit -l unlimited`)",
+            std::io::Error::last_os_error()
+        ))
+    }
+}
+
+/// Apply `rt` to the calling thread.
+fn apply_realtime(rt: RealTime) -> RealTimeReport {
+    let mut report = RealTimeReport::default();
+    if let Some(priority) = rt.fifo_priority {
+        let param = libc::sched_param {
+            sched_priority: priority.clamp(1, 99),
+        };
+        // SAFETY: valid pointer to a sched_param for the calling thread.
+        let r =
+            unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+        if r == 0 {
+            report.fifo = true;
+        } else {
+            report.warnings.push(format!(
+                "SCHED_FIFO priority {priority} refused ({}): the servo runs at normal priority \
+                 and its wake-ups will be later (needs CAP_SYS_NICE or an rtprio limit)",
+                std::io::Error::from_raw_os_error(r)
+            ));
+        }
+    }
+    if let Some(cpu) = rt.cpu {
+        // SAFETY: cpu_set_t is plain data; CPU_SET bounds-checks `cpu`.
+        let r = unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            if cpu < libc::CPU_SETSIZE as usize {
+                libc::CPU_SET(cpu, &mut set);
+                libc::pthread_setaffinity_np(
+                    libc::pthread_self(),
+                    std::mem::size_of::<libc::cpu_set_t>(),
+                    &set,
+                )
+            } else {
+                libc::EINVAL
+            }
+        };
+        if r == 0 {
+            report.cpu = Some(cpu);
+        } else {
+            report.warnings.push(format!(
+                "cannot pin the servo thread to CPU {cpu} ({}): it runs on any CPU",
+                std::io::Error::from_raw_os_error(r)
+            ));
+        }
+    }
+    report
+}
+
 /// A running servo thread.
 pub struct ServoThread {
     stop: Arc<AtomicBool>,
     handle: Option<JoinHandle<()>>,
+    realtime: RealTimeReport,
 }
 
 impl ServoThread {
-    /// Start ticking `tick` every period on the wall clock (CLOCK_MONOTONIC,
-    /// absolute deadlines, so sleep jitter does not accumulate), publishing
-    /// each snapshot to `status`.
-    ///
-    /// With `priority` 1 to 99 the thread asks for `SCHED_FIFO` at that
-    /// priority first; where the OS refuses (no `CAP_SYS_NICE`, no
-    /// `LimitRTPRIO`), it says so in the log and runs at normal priority.
-    /// With `cpu`, it pins itself to that CPU (e.g. one isolated with
-    /// `isolcpus=`), or says in the log why it could not.
+    /// Start ticking `tick`, publishing each snapshot to `status`. With
+    /// [`Pacing::Wall`] it wakes on absolute `CLOCK_MONOTONIC` deadlines
+    /// one period apart (so sleep jitter does not accumulate), counts
+    /// overruns and measures how late each wake-up is; `rt` is applied to
+    /// the thread first.
     pub fn spawn(
         mut tick: ServoTick,
         mut status: Writer<Snapshot>,
-        priority: u8,
-        cpu: Option<usize>,
+        pacing: Pacing,
+        rt: RealTime,
     ) -> std::io::Result<ServoThread> {
         let stop = Arc::new(AtomicBool::new(false));
         let stop_flag = stop.clone();
         let period = Duration::from_secs_f64(tick.period());
+        let (report_tx, report_rx) = std::sync::mpsc::channel();
         let handle = std::thread::Builder::new()
             .name("kerf-servo".into())
             .spawn(move || {
-                if priority > 0 {
-                    match make_realtime(priority) {
-                        Ok(()) => tracing::info!(priority, "servo thread runs SCHED_FIFO"),
-                        Err(e) => tracing::warn!(
-                            "servo thread runs without real-time priority ({e}): expect late \
-                             ticks under load; see docs/deploy.md"
-                        ),
-                    }
-                }
-                // Pinned after going real-time, so the move to the CPU
-                // itself happens at real-time priority.
-                if let Some(cpu) = cpu {
-                    match pin_to_cpu(cpu) {
-                        Ok(()) => tracing::info!(cpu, "servo thread pinned"),
-                        Err(e) => tracing::warn!(cpu, "cannot pin the servo thread: {e}"),
-                    }
-                }
-                let period_ns = period.as_nanos() as i64;
-                let mut deadline = now_ns();
-                let mut overruns = 0;
-                let mut latency_max = 0u64;
-                let mut histogram = [0u64; LATENCY_BOUNDS_NS.len() + 1];
-                while !stop_flag.load(Ordering::Relaxed) {
-                    deadline += period_ns;
-                    sleep_until_ns(deadline);
-                    let late = now_ns() - deadline;
-                    let late_ns = late.max(0) as u64;
-                    latency_max = latency_max.max(late_ns);
-                    let bucket = LATENCY_BOUNDS_NS
-                        .iter()
-                        .position(|&b| late_ns <= b)
-                        .unwrap_or(LATENCY_BOUNDS_NS.len());
-                    histogram[bucket] += 1;
-                    if late >= period_ns {
-                        // Missed at least a whole period: count it and restart the
-                        // schedule from now rather than running a burst of ticks.
-                        overruns += 1;
-                        deadline = now_ns();
-                    }
-                    tick.tick();
-                    let mut snap = *tick.snapshot();
-                    snap.overruns = overruns;
-                    snap.latency_max_ns = latency_max;
-                    snap.latency_histogram = histogram;
-                    status.write(&snap);
+                let _ = report_tx.send(apply_realtime(rt));
+                match pacing {
+                    Pacing::Wall => run_wall(&mut tick, &mut status, &stop_flag, period),
+                    Pacing::Virtual => run_virtual(&mut tick, &mut status, &stop_flag),
                 }
             })?;
+        let realtime = report_rx.recv().unwrap_or_default();
         Ok(ServoThread {
             stop,
             handle: Some(handle),
+            realtime,
         })
+    }
+
+    /// What the thread got of the real-time settings asked for.
+    pub fn realtime(&self) -> &RealTimeReport {
+        &self.realtime
     }
 
     /// Stop the thread and wait for it.
@@ -544,30 +811,63 @@ impl ServoThread {
     }
 }
 
-impl Drop for ServoThread {
-    fn drop(&mut self) {
-        self.stop();
+/// How often the latency percentiles are recomputed, in ticks (the scan
+/// of the histogram is kept out of most ticks).
+const LATENCY_EVERY: u64 = 256;
+
+fn run_wall(
+    tick: &mut ServoTick,
+    status: &mut Writer<Snapshot>,
+    stop: &AtomicBool,
+    period: Duration,
+) {
+    let period_ns = period.as_nanos() as i64;
+    let mut deadline = now_ns();
+    let mut overruns = 0;
+    let mut histogram = LatencyHistogram::default();
+    let mut latency = LatencyStats::default();
+    let mut n: u64 = 0;
+    while !stop.load(Ordering::Relaxed) {
+        deadline += period_ns;
+        sleep_until_ns(deadline);
+        let late = now_ns() - deadline;
+        histogram.record(late.max(0) as u64);
+        if late >= period_ns {
+            // Missed at least a whole period: count it and restart the
+            // schedule from now rather than running a burst of ticks.
+            overruns += 1;
+            deadline = now_ns();
+        }
+        tick.tick();
+        n += 1;
+        if n % LATENCY_EVERY == 1 {
+            latency = histogram.stats();
+        }
+        let mut snap = *tick.snapshot();
+        snap.overruns = overruns;
+        snap.latency = latency;
+        status.write(&snap);
     }
 }
 
-/// Run the calling thread on `cpu` only.
-fn pin_to_cpu(cpu: usize) -> nix::Result<()> {
-    let mut set = nix::sched::CpuSet::new();
-    set.set(cpu)?;
-    nix::sched::sched_setaffinity(nix::unistd::Pid::from_raw(0), &set)
+fn run_virtual(tick: &mut ServoTick, status: &mut Writer<Snapshot>, stop: &AtomicBool) {
+    while !stop.load(Ordering::Relaxed) {
+        // Wait for the planner (it is fast; this is rarely more than a
+        // few polls), so the executor sees the same queue as on a real run.
+        while !tick.input_complete() && !stop.load(Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_micros(50));
+        }
+        let snap = *tick.tick();
+        status.write(&snap);
+        if !snap.moving && tick.queue.slots() == 0 {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
 }
 
-/// Switch the calling thread to `SCHED_FIFO` at `priority`.
-fn make_realtime(priority: u8) -> std::io::Result<()> {
-    let param = libc::sched_param {
-        sched_priority: i32::from(priority),
-    };
-    // SAFETY: valid pointer to a sched_param for the calling thread.
-    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::from_raw_os_error(rc))
+impl Drop for ServoThread {
+    fn drop(&mut self) {
+        self.stop();
     }
 }
 
@@ -595,5 +895,32 @@ fn sleep_until_ns(deadline: i64) {
             &ts,
             std::ptr::null_mut(),
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refused_real_time_settings_are_warned_about_not_fatal() {
+        // No machine has CPU 1000 (CPU_SETSIZE is 1024) nor 5000.
+        for cpu in [1000, 5000] {
+            let report = std::thread::spawn(move || {
+                apply_realtime(RealTime {
+                    fifo_priority: None,
+                    cpu: Some(cpu),
+                })
+            })
+            .join()
+            .unwrap();
+            assert_eq!(report.cpu, None);
+            assert!(!report.fifo);
+            assert_eq!(report.warnings.len(), 1, "{report:?}");
+            assert!(
+                report.warnings[0].contains(&format!("cannot pin the servo thread to CPU {cpu}")),
+                "{report:?}"
+            );
+        }
     }
 }

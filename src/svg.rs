@@ -29,6 +29,31 @@ pub struct Chart {
     pub series: Vec<Series>,
 }
 
+impl Chart {
+    /// The XY view of a tool path: the programmed move end points against
+    /// the path `name` took (`points`).
+    pub fn xy_path(
+        title: &str,
+        programmed: &[[f64; 3]],
+        name: &str,
+        points: Vec<(f64, f64)>,
+    ) -> Chart {
+        Chart {
+            title: title.into(),
+            x_label: "X, mm".into(),
+            y_label: "Y, mm".into(),
+            equal_aspect: true,
+            series: vec![
+                Series::new(
+                    "programmed",
+                    programmed.iter().map(|p| (p[0], p[1])).collect(),
+                ),
+                Series::new(name, points),
+            ],
+        }
+    }
+}
+
 const COLOURS: [&str; 6] = [
     "#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b",
 ];

@@ -843,6 +843,24 @@ fn every_command_and_event_matches_the_schema() {
     }
     w.request(&Command::Unsubscribe).unwrap();
     c.request(&Command::Status).unwrap();
+    // Force control needs a machine with a force controller.
+    let cutter = Kerfd::start(&[
+        "--machine",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/examples/aluminium-step.toml"),
+    ]);
+    let mut f = cutter.client();
+    let on = f
+        .request(&Command::ForceControl {
+            enabled: true,
+            target_n: Some(250.0),
+        })
+        .unwrap();
+    assert_eq!(on["target_n"], 250.0);
+    f.request(&Command::ForceControl {
+        enabled: false,
+        target_n: None,
+    })
+    .unwrap();
 
     let seen = support::schema().seen.lock().unwrap().clone();
     for cmd in kerf::protocol::COMMANDS {

@@ -55,6 +55,8 @@ pub struct Setpoints {
     pub joints: [JointCommand; MAX_JOINTS],
     /// Drives enabled (false: outputs off, motors free or braked).
     pub enable: bool,
+    /// Commanded spindle speed, rpm (0: stopped).
+    pub spindle_speed: f64,
 }
 
 impl Default for Setpoints {
@@ -62,6 +64,7 @@ impl Default for Setpoints {
         Setpoints {
             joints: [JointCommand::default(); MAX_JOINTS],
             enable: false,
+            spindle_speed: 0.0,
         }
     }
 }
@@ -82,6 +85,9 @@ pub struct Feedback {
     pub joints: [JointFeedback; MAX_JOINTS],
     /// Spindle motor current, A (0 where not measured).
     pub spindle_current: f64,
+    /// Largest cutting force at the tool over the period, N, where a force
+    /// sensor (a dynamometer, or the simulator) measures it; 0 otherwise.
+    pub cutting_force: f64,
 }
 
 /// A hardware fault: motion must stop and the reason reach the operator.

@@ -38,6 +38,13 @@ pub(crate) fn build(config: &HalConfig, initial: &[f64]) -> Result<Box<dyn Hal>,
     };
     let mut parts = Vec::new();
     let sim = pick(&|w| w == Wire::Sim);
+    if config.sim.cutting.is_some() && sim.len() != initial.len() {
+        // The cutting process reads the tool tip from the simulated joints.
+        return Err(HalConfigError::key(
+            "sim.cutting",
+            "the simulated cutting process needs every joint simulated",
+        ));
+    }
     if !sim.is_empty() {
         let at: Vec<f64> = sim.iter().map(|&j| initial[j]).collect();
         parts.push(Part {
@@ -101,7 +108,9 @@ impl Hal for Router {
     ) -> Result<(), HalFault> {
         let mut result = Ok(());
         feedback.spindle_current = 0.0;
+        feedback.cutting_force = 0.0;
         self.local_out.enable = out.enable;
+        self.local_out.spindle_speed = out.spindle_speed;
         for part in &mut self.parts {
             for (local, &global) in part.joints.iter().enumerate() {
                 self.local_out.joints[local] = out.joints[global];
@@ -115,6 +124,7 @@ impl Hal for Router {
                 feedback.joints[global] = self.local_fb.joints[local];
             }
             feedback.spindle_current += self.local_fb.spindle_current;
+            feedback.cutting_force = feedback.cutting_force.max(self.local_fb.cutting_force);
             if let (Ok(()), Err(e)) = (&result, r) {
                 result = Err(renumber(e, &part.joints));
             }

@@ -83,6 +83,22 @@ fn exchange_never_allocates() {
     });
     assert_eq!(n, 0, "sim + can exchange allocated");
 
+    // The identified plant with a noisy quantising encoder, cutting.
+    let cfg: HalConfig = toml::from_str(
+        "backend = \"sim\"\n[sim]\nplant = \"identified\"\nencoder_resolution = 0.001\nposition_noise = 0.0005\n[sim.cutting]\nstock_top = 0.0\nsteps = [{ x = 0.1, top = 2.0 }]\n",
+    )
+    .unwrap();
+    let mut sim = build(&cfg, &[0.0, 0.0, -2.0]).unwrap();
+    out.spindle_speed = 1000.0;
+    let n = count(|| {
+        for k in 0..2000 {
+            out.joints[0].effort = 0.15 * (k as f64 * 0.01).sin().abs();
+            sim.exchange(0.001, &out, &mut fb).unwrap();
+        }
+    });
+    assert_eq!(n, 0, "identified sim with cutting allocated");
+    assert!(fb.spindle_current > 2.0, "it cut: {}", fb.spindle_current);
+
     // CAN on a virtual clock, driven in lock step.
     let clock = VirtualClock::at(0);
     let can_cfg = CanConfig {

@@ -3,6 +3,8 @@
 use std::collections::BTreeMap;
 
 use kerf_interp::{Axis, Position};
+use kerf_motion::control::LoopGains;
+use kerf_motion::fuzzy::{CurrentSensor, FuzzyConfig};
 use kerf_motion::kinematics::{AxisSpec, JointSpec};
 use kerf_motion::Limits;
 use serde::Deserialize;
@@ -55,9 +57,35 @@ pub struct JointToml {
     /// Largest distance between commanded and measured joint position
     /// before the servo faults, joint units; unchecked when absent.
     pub following_error: Option<f64>,
+    /// Position loop, proportional gain, drive units (V) per mm.
+    pub kp: Option<f64>,
+    /// Position loop, integral gain, V per mm·s.
+    pub ki: Option<f64>,
+    /// Position loop, derivative gain, V per mm/s.
+    pub kd: Option<f64>,
+    /// Velocity feedforward, V per mm/s.
+    pub kvff: Option<f64>,
+    /// Acceleration feedforward, V per mm/s².
+    pub kaff: Option<f64>,
+    /// Largest drive input either way, V.
+    pub max_output: Option<f64>,
 }
 
 impl JointToml {
+    /// The joint's position-loop gains: each key given, the seed's
+    /// ([`LoopGains::SEED`]) for the rest.
+    pub fn loop_gains(&self) -> LoopGains {
+        let d = LoopGains::SEED;
+        LoopGains {
+            kp: self.kp.unwrap_or(d.kp),
+            ki: self.ki.unwrap_or(d.ki),
+            kd: self.kd.unwrap_or(d.kd),
+            kvff: self.kvff.unwrap_or(d.kvff),
+            kaff: self.kaff.unwrap_or(d.kaff),
+            max_output: self.max_output.unwrap_or(d.max_output),
+        }
+    }
+
     /// The joint's limits.
     pub fn limits(&self) -> Limits {
         Limits {
@@ -94,6 +122,80 @@ pub struct Description {
     /// HAL wiring, interpreted by the io crate.
     #[serde(default)]
     pub hal: toml::Table,
+    /// `[spindle]`: its speed and the current-to-force calibration.
+    #[serde(default)]
+    pub spindle: Option<SpindleToml>,
+    /// `[force_control]`: the fuzzy cutting-force feed override.
+    #[serde(default)]
+    pub force_control: Option<ForceControlToml>,
+}
+
+/// `[spindle]`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpindleToml {
+    /// Spindle speed while the machine runs, rpm (until programs can set
+    /// it with S words).
+    pub rpm: f64,
+    /// Motor current turning without cutting, I0, A.
+    #[serde(default = "default_idle_current")]
+    pub idle_current: f64,
+    /// Motor current per newton of cutting force, k, A/N.
+    #[serde(default = "default_current_per_newton")]
+    pub current_per_newton: f64,
+}
+
+fn default_idle_current() -> f64 {
+    2.0
+}
+
+fn default_current_per_newton() -> f64 {
+    0.01
+}
+
+impl SpindleToml {
+    /// The current-to-force conversion.
+    pub fn sensor(&self) -> CurrentSensor {
+        CurrentSensor {
+            idle_current: self.idle_current,
+            current_per_newton: self.current_per_newton,
+        }
+    }
+}
+
+/// `[force_control]`; every key defaults to [`FuzzyConfig::default`].
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ForceControlToml {
+    /// Target force F_d at start-up, N; off at start-up when absent.
+    pub target: Option<f64>,
+    /// [`FuzzyConfig::gain_e`].
+    pub gain_e: Option<f64>,
+    /// [`FuzzyConfig::gain_ce`].
+    pub gain_ce: Option<f64>,
+    /// [`FuzzyConfig::gain_out`].
+    pub gain_out: Option<f64>,
+    /// [`FuzzyConfig::min_override`].
+    pub min_override: Option<f64>,
+    /// [`FuzzyConfig::max_override`].
+    pub max_override: Option<f64>,
+    /// [`FuzzyConfig::engage`].
+    pub engage: Option<f64>,
+}
+
+impl ForceControlToml {
+    /// The controller settings.
+    pub fn config(&self) -> FuzzyConfig {
+        let d = FuzzyConfig::default();
+        FuzzyConfig {
+            gain_e: self.gain_e.unwrap_or(d.gain_e),
+            gain_ce: self.gain_ce.unwrap_or(d.gain_ce),
+            gain_out: self.gain_out.unwrap_or(d.gain_out),
+            min_override: self.min_override.unwrap_or(d.min_override),
+            max_override: self.max_override.unwrap_or(d.max_override),
+            engage: self.engage.unwrap_or(d.engage),
+        }
+    }
 }
 
 impl Description {
@@ -159,6 +261,51 @@ impl Description {
                     format!("joints[{i}].home"),
                     format!("{h} is outside the joint's stroke {} .. {}", j.min, j.max),
                 ));
+            }
+            if let Some((k, v)) = j.loop_gains().invalid() {
+                return Err(key_err(
+                    format!("joints[{i}].{k}"),
+                    format!("must be a number ≥ 0, got {v}"),
+                ));
+            }
+        }
+        if let Some(s) = &d.spindle {
+            if !(s.rpm.is_finite() && s.rpm > 0.0) {
+                return Err(key_err(
+                    "spindle.rpm".into(),
+                    format!("must be a positive number, got {}", s.rpm),
+                ));
+            }
+            if !(s.current_per_newton.is_finite() && s.current_per_newton > 0.0) {
+                return Err(key_err(
+                    "spindle.current_per_newton".into(),
+                    format!("must be a positive number, got {}", s.current_per_newton),
+                ));
+            }
+            if !s.idle_current.is_finite() {
+                return Err(key_err(
+                    "spindle.idle_current".into(),
+                    format!("must be a number, got {}", s.idle_current),
+                ));
+            }
+        }
+        if let Some(f) = &d.force_control {
+            if d.spindle.is_none() {
+                return Err(key_err(
+                    "force_control".into(),
+                    "needs a [spindle] table: the spindle speed sets the controller's \
+                     period and its current is the force sensor"
+                        .into(),
+                ));
+            }
+            if let Some(t) = f.target.filter(|t| !(t.is_finite() && *t > 0.0)) {
+                return Err(key_err(
+                    "force_control.target".into(),
+                    format!("must be a positive force in N, got {t}"),
+                ));
+            }
+            if let Some((k, reason)) = f.config().invalid() {
+                return Err(key_err(format!("force_control.{k}"), reason));
             }
         }
         for (name, value) in &d.home {
@@ -396,6 +543,49 @@ max_acceleration = 1.0
             e,
             "m.toml: key `axes.x.max_velocity`: must be a positive number, got -1"
         );
+    }
+
+    #[test]
+    fn servo_keys_are_checked() {
+        let with = |extra: &str| format!("{GOOD}{extra}\n");
+        let d = Description::parse(&with("following_error = 0.5\nkp = 2.0"), "m.toml").unwrap();
+        assert_eq!(d.joints[0].following_error, Some(0.5));
+        let g = d.joints[0].loop_gains();
+        assert_eq!((g.kp, g.kd), (2.0, LoopGains::SEED.kd));
+        let e = Description::parse(&with("following_error = 0.0"), "m.toml").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key `joints[0].following_error`: must be a positive number, got 0"
+        );
+        let e = Description::parse(&with("kaff = -1.0"), "m.toml").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m.toml: key `joints[0].kaff`: must be a number ≥ 0, got -1"
+        );
+        let e = Description::parse(&format!("{GOOD}[force_control]\n"), "m.toml").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("key `force_control`: needs a [spindle]"),
+            "{e}"
+        );
+        let spindle = "[spindle]\nrpm = 1000.0\n";
+        let e = Description::parse(
+            &format!("{GOOD}{spindle}[force_control]\nmax_override = 3.0\n"),
+            "m.toml",
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().contains("key `force_control.max_override`"),
+            "{e}"
+        );
+        let d = Description::parse(
+            &format!("{GOOD}{spindle}[force_control]\ntarget = 250.0\n"),
+            "m.toml",
+        )
+        .unwrap();
+        assert_eq!(d.force_control.unwrap().target, Some(250.0));
+        let e = Description::parse(&format!("{GOOD}[spindle]\nrpm = 0.0\n"), "m.toml").unwrap_err();
+        assert!(e.to_string().contains("key `spindle.rpm`"), "{e}");
     }
 
     #[test]

@@ -47,6 +47,8 @@ pub struct Executor {
     line: u32,
     dwell_elapsed: f64,
     feed_override: f64,
+    /// Second factor on feed moves, from the cutting-force controller.
+    feed_scale: f64,
     rapid_override: f64,
     hold: bool,
     single_block: bool,
@@ -300,6 +302,7 @@ impl Executor {
             line: 0,
             dwell_elapsed: 0.0,
             feed_override: 1.0,
+            feed_scale: 1.0,
             rapid_override: 1.0,
             hold: false,
             single_block: false,
@@ -327,6 +330,23 @@ impl Executor {
     /// Feed override factor in force.
     pub fn feed_override(&self) -> f64 {
         self.feed_override
+    }
+
+    /// The adaptive feed factor (the cutting-force controller's override),
+    /// ≥ 0. It multiplies the operator's feed override on feed moves: with
+    /// both, the feed is programmed × operator × adaptive, still capped by
+    /// the machine's limits.
+    pub fn set_feed_scale(&mut self, factor: f64) {
+        self.feed_scale = if factor.is_finite() {
+            factor.max(0.0)
+        } else {
+            1.0
+        };
+    }
+
+    /// Adaptive feed factor in force.
+    pub fn feed_scale(&self) -> f64 {
+        self.feed_scale
     }
 
     /// Rapid override factor in force.
@@ -381,7 +401,9 @@ impl Executor {
             return 0.0;
         }
         match seg.kind {
-            SegmentKind::Feed => seg.max_velocity.min(seg.feed * self.feed_override),
+            SegmentKind::Feed => seg
+                .max_velocity
+                .min(seg.feed * self.feed_override * self.feed_scale),
             SegmentKind::Rapid => seg.max_velocity * self.rapid_override,
             SegmentKind::Dwell { .. } | SegmentKind::Stop { .. } => 0.0,
         }
@@ -1239,6 +1261,28 @@ mod simulation {
         assert!(v <= 25.0 && v >= 25.0 - margin - 1e-9, "{v}");
         let peak = out.iter().map(|s| s.velocity).fold(0.0, f64::max);
         assert!(peak <= 75.0 && peak >= 75.0 - margin - 1e-9, "{peak}");
+    }
+
+    #[test]
+    fn feed_scale_multiplies_the_operator_override_on_feed_moves_only() {
+        let mut q = planned(
+            "G1 X200 F3000\nG0 X0\nM2\n",
+            PathMode::Blend { tolerance: 0.01 },
+        );
+        let out = run(&mut q, |n, ex| {
+            if n == 0 {
+                ex.set_feed_override(1.2);
+                ex.set_feed_scale(0.5);
+            }
+        });
+        // 50 mm/s × 1.2 × 0.5 = 30 mm/s on the feed move (within the
+        // executor's margin below the target).
+        let margin = 50_000.0 * 1e-6 / 8.0;
+        let v = out[2500].velocity;
+        assert!(v <= 30.0 && v >= 30.0 - margin - 1e-9, "{v}");
+        // The rapid ignores both: it reaches the 100 mm/s limit.
+        let peak = out.iter().map(|s| s.velocity).fold(0.0, f64::max);
+        assert!(peak > 99.0, "{peak}");
     }
 
     #[test]

@@ -10,12 +10,17 @@
 //! * [`exec`]: the [`Executor`], which advances along planned segments one
 //!   servo period at a time with jerk-limited path speed. It is real-time
 //!   safe: no allocation, no locks, no I/O.
+//! * [`control`]: the per-joint position loop (PD + feedforward) the servo
+//!   runs on the host; [`fuzzy`]: the cutting-force feed-override
+//!   controller. Plain state and arithmetic, real-time safe.
 
 // Numerical code over the nine axes indexes several parallel arrays by axis;
 // iterator chains over four zipped arrays would read worse.
 #![allow(clippy::needless_range_loop)]
 
+pub mod control;
 pub mod exec;
+pub mod fuzzy;
 pub mod kinematics;
 pub mod offline;
 pub mod path;

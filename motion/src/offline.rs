@@ -120,6 +120,119 @@ struct Programmed {
     end: Vec9,
 }
 
+/// The programmed moves (as straight lines between their end points) near
+/// where the machine is, to measure how far a point is from the path.
+///
+/// Moves are added as the program is read, ahead of the machine; moves
+/// more than `keep_back` mm of path behind the executing line are dropped
+/// (at least one move before it is always kept: blends sit between two
+/// moves).
+#[derive(Clone, Debug)]
+pub struct PathWindow {
+    moves: VecDeque<Programmed>,
+    last_end: Vec9,
+    keep_back: f64,
+}
+
+impl PathWindow {
+    /// An empty path starting at `start`, keeping `keep_back` mm of moves
+    /// behind the executing line.
+    pub fn new(start: Position, keep_back: f64) -> PathWindow {
+        PathWindow {
+            moves: VecDeque::new(),
+            last_end: start.to_array(),
+            keep_back,
+        }
+    }
+
+    /// Record the move of `canon`, if it is one; returns the XYZ points it
+    /// adds to the path (for plots). Arcs are kept as chords whose sag is
+    /// under 0.1 µm, so distances to them are distances to the arc to that
+    /// precision; a move that goes nowhere (an F word alone on a G1 line) is
+    /// no geometry.
+    pub fn push(&mut self, canon: &Canon) -> Vec<[f64; 3]> {
+        let mut added = Vec::new();
+        match &canon.cmd {
+            CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
+                if end.to_array() != self.last_end =>
+            {
+                let end = end.to_array();
+                self.moves.push_back(Programmed {
+                    line: canon.source.line,
+                    start: self.last_end,
+                    end,
+                });
+                self.last_end = end;
+                added.push([end[0], end[1], end[2]]);
+            }
+            CanonCmd::ArcFeed {
+                end,
+                center,
+                plane,
+                turns,
+            } => {
+                let [first, second, _] = plane.axes();
+                let arc = Arc::from_program(
+                    &self.last_end,
+                    &end.to_array(),
+                    (first.index(), second.index()),
+                    (center[0], center[1]),
+                    *turns,
+                );
+                let shape = Shape::Arc(arc);
+                let radius = arc.radius.max(arc.end_radius).max(1e-9);
+                let step = 2.0 * (1.0 - 1e-4 / radius).clamp(-1.0, 1.0).acos();
+                let n = ((arc.sweep.abs() / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
+                let len = shape.length();
+                let mut from = self.last_end;
+                for k in 1..=n {
+                    let to = shape.point(len * k as f64 / n as f64);
+                    self.moves.push_back(Programmed {
+                        line: canon.source.line,
+                        start: from,
+                        end: to,
+                    });
+                    added.push([to[0], to[1], to[2]]);
+                    from = to;
+                }
+                self.last_end = end.to_array();
+            }
+            _ => {}
+        }
+        added
+    }
+
+    /// XYZ distance of `p` from the nearest kept move up to line `line` + 1,
+    /// with `line` executing now; `None` before any move.
+    pub fn distance(&mut self, p: &Position, line: u32) -> Option<f64> {
+        let length = |m: &Programmed| {
+            (0..3)
+                .map(|i| (m.end[i] - m.start[i]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        loop {
+            let before = self.moves.iter().take_while(|m| m.line < line).count();
+            if before < 2 {
+                break;
+            }
+            let behind: f64 = self.moves.iter().take(before).skip(1).map(length).sum();
+            if behind < self.keep_back {
+                break;
+            }
+            self.moves.pop_front();
+        }
+        let p = p.to_array();
+        let near = self
+            .moves
+            .iter()
+            .take_while(|m| m.line <= line + 1)
+            .map(|m| distance_to_segment(&p, &m.start, &m.end))
+            .fold(f64::INFINITY, f64::min);
+        near.is_finite().then_some(near)
+    }
+}
+
 /// Distance from `p` to the segment a–b in XYZ.
 fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
     let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
@@ -158,6 +271,32 @@ impl Differences {
     }
 }
 
+/// Plan a whole program at once: its segments in order, then a
+/// [`SegmentKind::Stop`] marker tagged `tag` where it ends. For tests and
+/// tools that queue a short program in one go.
+pub fn plan_program(
+    program: impl IntoIterator<Item = Result<Canon, InterpError>>,
+    kins: &dyn Kinematics,
+    start: Position,
+    config: PlannerConfig,
+    tag: u32,
+) -> Result<Vec<Segment>, RunError> {
+    let mut planner = Planner::new(kins, start, config);
+    let mut out = Vec::new();
+    for canon in program {
+        planner.plan(&canon?)?;
+        out.extend(std::iter::from_fn(|| planner.next_segment()));
+    }
+    planner.finish();
+    out.extend(std::iter::from_fn(|| planner.next_segment()));
+    out.push(Segment::marker(
+        SegmentKind::Stop { tag },
+        0,
+        planner.position(),
+    ));
+    Ok(out)
+}
+
 /// Run `program` (canon, in order) on `kins` from `start` with servo period
 /// `config.planner.period`, and measure it.
 pub fn run(
@@ -171,8 +310,7 @@ pub fn run(
     let mut queue: VecDeque<Segment> = VecDeque::new();
     let mut executor = Executor::new(start);
     let mut report = Report::default();
-    let mut programmed: VecDeque<Programmed> = VecDeque::new();
-    let mut last_end = start.to_array();
+    let mut programmed = PathWindow::new(start, 0.0);
     let njoints = kins.joints().len();
 
     let axis_specs = kins.axes().to_vec();
@@ -209,59 +347,7 @@ pub fn run(
                 }
                 Some(canon) => {
                     let canon = canon?;
-                    match &canon.cmd {
-                        // A move that goes nowhere (an F word alone on a
-                        // G1 line) is no geometry to measure against.
-                        CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
-                            if end.to_array() != last_end =>
-                        {
-                            let end = end.to_array();
-                            programmed.push_back(Programmed {
-                                line: canon.source.line,
-                                start: last_end,
-                                end,
-                            });
-                            report.programmed.push([end[0], end[1], end[2]]);
-                            last_end = end;
-                        }
-                        CanonCmd::ArcFeed {
-                            end,
-                            center,
-                            plane,
-                            turns,
-                        } => {
-                            // The arc as chords whose sag is under 0.1 µm,
-                            // so the deviation measured against them is the
-                            // deviation from the arc to that precision.
-                            let [first, second, _] = plane.axes();
-                            let arc = Arc::from_program(
-                                &last_end,
-                                &end.to_array(),
-                                (first.index(), second.index()),
-                                (center[0], center[1]),
-                                *turns,
-                            );
-                            let shape = Shape::Arc(arc);
-                            let radius = arc.radius.max(arc.end_radius).max(1e-9);
-                            let step = 2.0 * (1.0 - 1e-4 / radius).clamp(-1.0, 1.0).acos();
-                            let n = ((arc.sweep.abs() / step.max(1e-6)).ceil() as usize)
-                                .clamp(1, 100_000);
-                            let len = shape.length();
-                            let mut from = last_end;
-                            for k in 1..=n {
-                                let to = shape.point(len * k as f64 / n as f64);
-                                programmed.push_back(Programmed {
-                                    line: canon.source.line,
-                                    start: from,
-                                    end: to,
-                                });
-                                report.programmed.push([to[0], to[1], to[2]]);
-                                from = to;
-                            }
-                            last_end = end.to_array();
-                        }
-                        _ => {}
-                    }
+                    report.programmed.extend(programmed.push(&canon));
                     planner.plan(&canon)?;
                 }
             }
@@ -285,17 +371,11 @@ pub fn run(
         let p = sample.position.to_array();
         // Deviation: distance to the nearest programmed move around the
         // executing line (blends sit between two moves).
-        while programmed.len() > 2 && programmed[1].line < sample.line {
-            programmed.pop_front();
-        }
-        let near = programmed
-            .iter()
-            .take_while(|m| m.line <= sample.line + 1)
-            .map(|m| distance_to_segment(&p, &m.start, &m.end))
-            .fold(f64::INFINITY, f64::min);
-        if near.is_finite() && near > report.max_deviation {
-            report.max_deviation = near;
-            report.max_deviation_at = (time, sample.line);
+        if let Some(near) = programmed.distance(&sample.position, sample.line) {
+            if near > report.max_deviation {
+                report.max_deviation = near;
+                report.max_deviation_at = (time, sample.line);
+            }
         }
 
         for (k, spec) in axis_specs.iter().enumerate() {

@@ -49,6 +49,10 @@ pub struct Segment {
     pub max_jerk: f64,
     /// Highest speed at the junction with the next segment, mm/s.
     pub exit_velocity: f64,
+    /// Cutting-force control along this segment, as the program asked
+    /// ([`Planner::set_force_control`]): the target force, N, or `None`
+    /// for off. The servo applies a change when the segment starts.
+    pub force_control: Option<f64>,
 }
 
 impl Segment {
@@ -65,6 +69,7 @@ impl Segment {
             max_acceleration: f64::INFINITY,
             max_jerk: f64::INFINITY,
             exit_velocity: 0.0,
+            force_control: None,
         }
     }
 
@@ -179,6 +184,8 @@ pub struct Planner<'k> {
     per_revolution: bool,
     /// Programmed spindle speed, rev/min.
     spindle_rpm: f64,
+    /// Programmed cutting-force control: target force, N.
+    force_control: Option<f64>,
     position: Position,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
@@ -260,6 +267,7 @@ impl<'k> Planner<'k> {
             feed_word: 0.0,
             per_revolution: false,
             spindle_rpm: 0.0,
+            force_control: None,
             position: start,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
@@ -274,6 +282,14 @@ impl<'k> Planner<'k> {
     /// Set the path control mode for the following moves.
     pub fn set_mode(&mut self, mode: PathMode) {
         self.mode = mode;
+    }
+
+    /// Cutting-force control for the following moves: on with target
+    /// force `newtons`, or off (`None`). This is what the program's
+    /// force-control M-code (`docs/control.md`) is to call; it travels with
+    /// the segments, so it takes effect in step with the motion.
+    pub fn set_force_control(&mut self, newtons: Option<f64>) {
+        self.force_control = newtons;
     }
 
     /// The next segment whose successors are known, if any.
@@ -780,6 +796,7 @@ impl<'k> Planner<'k> {
             max_acceleration: a,
             max_jerk: j,
             exit_velocity: 0.0,
+            force_control: self.force_control,
         }
     }
 

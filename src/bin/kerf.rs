@@ -27,7 +27,17 @@ struct Args {
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Print the machine state, current line and position.
-    Status,
+    Status {
+        /// Print the servo thread's wake-up latency (min, median, p99,
+        /// p99.9, max) and real-time settings.
+        #[arg(long)]
+        latency: bool,
+    },
+    /// Turn cutting-force control on (with a target force) or off.
+    Force {
+        #[command(subcommand)]
+        action: ForceAction,
+    },
     /// Live view: DRO, state, line, speed, overrides, program progress.
     Watch {
         /// Refresh rate, Hz (1 to 1000).
@@ -156,6 +166,33 @@ enum Cmd {
         #[arg(long)]
         segments: bool,
     },
+    /// Run a program on the simulated machine (virtual clock): following
+    /// and contour error, and the cutting force under force control.
+    Sim {
+        /// The program file.
+        file: PathBuf,
+        /// Machine: embedded name or TOML file.
+        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
+        machine: String,
+        /// Write an SVG plot: the path, and following error, feed, force and
+        /// override against time.
+        #[arg(long, value_name = "OUT.svg")]
+        plot: Option<PathBuf>,
+        /// The seed's pure PD: no velocity or acceleration feedforward.
+        #[arg(long)]
+        no_feedforward: bool,
+        /// Plant of the simulated joints [default: identified].
+        #[arg(long, value_enum, default_value = "identified")]
+        plant: PlantArg,
+        /// Force control on from the start with this target, N (as the
+        /// program's force-control M-code will do).
+        #[arg(long, value_name = "N")]
+        force: Option<f64>,
+        /// Servo period in microseconds (250 to 10000).
+        #[arg(long, value_name = "US", default_value_t = 1000,
+              value_parser = clap::value_parser!(u32).range(250..=10000))]
+        period_us: u32,
+    },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
         /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5) or a TOML file.
@@ -176,6 +213,26 @@ enum Cmd {
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
     },
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum PlantArg {
+    /// Each joint sits on its command (no servo dynamics).
+    Ideal,
+    /// The seed's identified feed drive, driven by the position loop.
+    Identified,
+}
+
+#[derive(Subcommand, Debug)]
+enum ForceAction {
+    /// On, holding the cutting force at TARGET newtons (default: the
+    /// current or configured target).
+    On {
+        #[arg(value_name = "TARGET_N")]
+        target: Option<f64>,
+    },
+    /// Off: the controller's feed override returns to 100 %.
+    Off,
 }
 
 #[derive(Subcommand, Debug)]
@@ -239,7 +296,39 @@ fn main() -> ExitCode {
     let json = args.json;
     let simple = |cmd: Command, done: &str| cli::simple(socket, &cmd, json, done);
     let result = match args.command {
-        Cmd::Status => cli::status::status(socket, json),
+        Cmd::Status { latency } => cli::status::status(socket, json, latency),
+        Cmd::Force { action } => match action {
+            ForceAction::On { target } => cli::status::force(socket, true, target),
+            ForceAction::Off => cli::status::force(socket, false, None),
+        },
+        Cmd::Sim {
+            file,
+            machine,
+            plot,
+            no_feedforward,
+            plant,
+            force,
+            period_us,
+        } => {
+            if force.is_some_and(|f| !(f.is_finite() && f > 0.0)) {
+                Err(Failure(
+                    cli::CANNOT_CONNECT,
+                    "--force takes a force in N above 0".into(),
+                ))
+            } else {
+                let options = kerf::simulate::SimOptions {
+                    period: period_us as f64 * 1e-6,
+                    feedforward: !no_feedforward,
+                    plant: Some(match plant {
+                        PlantArg::Ideal => kerf_io::sim::Plant::Ideal,
+                        PlantArg::Identified => kerf_io::sim::Plant::Identified,
+                    }),
+                    force_target: force,
+                    ..Default::default()
+                };
+                cli::sim::sim(&file, &machine, options, plot.as_deref(), json)
+            }
+        }
         Cmd::Watch { rate } => cli::watch::watch(socket, rate, json),
         Cmd::Run { file, from } => cli::run::run(socket, &file, from, json),
         Cmd::Open { file } => match std::fs::canonicalize(&file) {

@@ -8,6 +8,7 @@ use anyhow::Context;
 use clap::Parser;
 use kerf::config::{self, Config};
 use kerf::daemon::{bind_socket, Daemon, Options};
+use kerf::servo::{Pacing, RealTime};
 use kerf::systemd;
 
 /// The kerf CNC controller daemon. With no arguments it runs the embedded
@@ -32,6 +33,22 @@ struct Args {
     /// $STATE_DIRECTORY, $XDG_STATE_HOME/kerf or ~/.local/state/kerf].
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
+    /// Run the servo on a virtual clock: ticks back to back, each one
+    /// period of machine time, deterministic (for tests and simulation).
+    #[arg(long)]
+    virtual_clock: bool,
+    /// SCHED_FIFO priority of the servo thread, 1 to 99 [default: the
+    /// configuration's `servo.priority`, or 80].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(i32).range(1..=99))]
+    rt_priority: Option<i32>,
+    /// Pin the servo thread to this CPU [default: the configuration's
+    /// `servo.cpu`].
+    #[arg(long, value_name = "CPU")]
+    servo_cpu: Option<usize>,
+    /// Do not ask for SCHED_FIFO or lock memory (the servo runs as an
+    /// ordinary thread; wake-ups will be later).
+    #[arg(long)]
+    no_realtime: bool,
 }
 
 fn main() -> ExitCode {
@@ -67,8 +84,18 @@ fn run(args: Args) -> anyhow::Result<()> {
             .or(config.machine.clone())
             .unwrap_or_else(|| kerf_machines::DEFAULT_MACHINE.into()),
         period_us: args.period_us.or(config.servo.period_us).unwrap_or(1000),
-        priority: config.servo.priority.unwrap_or(80),
-        cpu: config.servo.cpu,
+        pacing: if args.virtual_clock {
+            Pacing::Virtual
+        } else {
+            Pacing::Wall
+        },
+        realtime: (!args.no_realtime).then_some(RealTime {
+            fifo_priority: Some(
+                args.rt_priority
+                    .unwrap_or(config.servo.priority.map_or(80, i32::from)),
+            ),
+            cpu: args.servo_cpu.or(config.servo.cpu),
+        }),
         state_dir: args
             .state_dir
             .or(config.state_dir.clone())
@@ -76,7 +103,6 @@ fn run(args: Args) -> anyhow::Result<()> {
         tcp_token: tcp.as_ref().and_then(|t| t.token.clone()),
     };
     tracing::info!(config = %config_name, "starting");
-    lock_memory();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -123,28 +149,6 @@ fn run(args: Args) -> anyhow::Result<()> {
     let _ = std::fs::remove_file(&socket);
     tracing::info!("stopped");
     result
-}
-
-/// Keep every page of the process in RAM, so the servo thread never waits
-/// for a page fault. Only where the memory-lock limit is unlimited (or we
-/// are root): with a finite limit, `MCL_FUTURE` would make allocations past
-/// it fail later, which is worse than the page faults.
-fn lock_memory() {
-    use nix::sys::mman::{mlockall, MlockAllFlags};
-    use nix::sys::resource::{getrlimit, Resource, RLIM_INFINITY};
-    let unlimited =
-        getrlimit(Resource::RLIMIT_MEMLOCK).is_ok_and(|(soft, _)| soft == RLIM_INFINITY);
-    if !unlimited && !nix::unistd::geteuid().is_root() {
-        tracing::warn!(
-            "not locking memory: the memory-lock limit is finite (LimitMEMLOCK=infinity in the unit, \
-             or `ulimit -l unlimited`); page faults may delay the servo"
-        );
-        return;
-    }
-    match mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE) {
-        Ok(()) => tracing::info!("memory locked"),
-        Err(e) => tracing::warn!("cannot lock memory ({e}): page faults may delay the servo"),
-    }
 }
 
 /// A function reading the servo's tick count, for the watchdog.

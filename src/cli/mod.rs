@@ -11,6 +11,7 @@ pub mod kins;
 pub mod offsets;
 pub mod plan;
 pub mod run;
+pub mod sim;
 pub mod status;
 pub mod watch;
 pub mod workspace;

@@ -222,22 +222,12 @@ fn print_report(machine: &str, report: &Report) -> std::io::Result<()> {
 fn write_plot(out: &Path, report: &Report, joint_names: &[String]) -> std::io::Result<()> {
     let pts = &report.points;
     let time: Vec<f64> = pts.iter().map(|p| p.time).collect();
-    let path = Chart {
-        title: "Tool path (XY): programmed and planned".into(),
-        x_label: "X, mm".into(),
-        y_label: "Y, mm".into(),
-        equal_aspect: true,
-        series: vec![
-            Series::new(
-                "programmed",
-                report.programmed.iter().map(|p| (p[0], p[1])).collect(),
-            ),
-            Series::new(
-                "planned",
-                pts.iter().map(|p| (p.position.x, p.position.y)).collect(),
-            ),
-        ],
-    };
+    let path = Chart::xy_path(
+        "Tool path (XY): programmed and planned",
+        &report.programmed,
+        "planned",
+        pts.iter().map(|p| (p.position.x, p.position.y)).collect(),
+    );
     let tool = Chart {
         title: "Tool tip against time".into(),
         x_label: "t, s".into(),

@@ -6,8 +6,9 @@ use super::{fmt_position, fmt_state, name, print_json, Failure};
 use crate::client::Client;
 use crate::protocol::Command;
 
-/// Print one status snapshot, human-readable or as JSON.
-pub fn status(socket: &Path, json: bool) -> Result<(), Failure> {
+/// Print one status snapshot, human-readable or as JSON; with `latency`
+/// the servo thread's timing figures too.
+pub fn status(socket: &Path, json: bool, latency: bool) -> Result<(), Failure> {
     let mut client = Client::connect(socket)?;
     if json {
         print_json(&client.request(&Command::Status)?);
@@ -39,12 +40,63 @@ pub fn status(socket: &Path, json: bool) -> Result<(), Failure> {
     if let Some(f) = &status.fault {
         println!("fault     {f}");
     }
+    let fe = status
+        .following_error
+        .iter()
+        .map(|e| format!("{e:.4}"))
+        .collect::<Vec<_>>()
+        .join("  ");
+    println!("follow    {fe} (mm, commanded − measured)");
+    if let Some(f) = &status.force {
+        match f.target_n {
+            Some(t) => println!(
+                "force     {:.1} N, target {t:.1} N, feed override {:.0} %",
+                f.force_n,
+                f.feed_override * 100.0
+            ),
+            None => println!("force     {:.1} N, control off", f.force_n),
+        }
+    }
+    let s = &status.servo;
     println!(
-        "servo     {} µs, {} ticks, {} overruns, latest wake-up {:.0} µs late",
-        status.servo.period_us,
-        status.servo.ticks,
-        status.servo.overruns,
-        status.servo.latency_max_us
+        "servo     {} µs, {} ticks, {} overruns, {} clock",
+        s.period_us, s.ticks, s.overruns, s.clock
     );
+    if latency {
+        let l = &s.latency;
+        if l.samples == 0 {
+            println!("latency   not measured (virtual clock, or no tick yet)");
+        } else {
+            println!(
+                "latency   min {:.1}  median {:.1}  p99 {:.1}  p99.9 {:.1}  max {:.1} µs ({} wake-ups)",
+                l.min_us, l.median_us, l.p99_us, l.p999_us, l.max_us, l.samples
+            );
+        }
+        println!(
+            "realtime  SCHED_FIFO {}, memory locked {}, CPU {}",
+            yes(s.sched_fifo),
+            yes(s.memory_locked),
+            s.cpu.map_or("any".to_string(), |c| c.to_string())
+        );
+    }
+    Ok(())
+}
+
+fn yes(b: bool) -> &'static str {
+    if b {
+        "yes"
+    } else {
+        "no"
+    }
+}
+
+/// `kerf force on [TARGET] | off`.
+pub fn force(socket: &Path, enabled: bool, target_n: Option<f64>) -> Result<(), Failure> {
+    let mut client = Client::connect(socket)?;
+    let reply = client.request(&Command::ForceControl { enabled, target_n })?;
+    match reply.get("target_n").and_then(|t| t.as_f64()) {
+        Some(t) if enabled => println!("force control on, target {t:.1} N"),
+        _ => println!("force control off"),
+    }
     Ok(())
 }

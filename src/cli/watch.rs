@@ -61,7 +61,7 @@ pub fn render(status: &Status, messages: &[String]) -> String {
     }
     s.push_str(&format!(
         "\n  servo {} µs  overruns {}  latest wake-up {:.0} µs late\n",
-        status.servo.period_us, status.servo.overruns, status.servo.latency_max_us
+        status.servo.period_us, status.servo.overruns, status.servo.latency.max_us
     ));
     s
 }

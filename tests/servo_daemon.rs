@@ -1,0 +1,186 @@
+//! The servo through the real daemon: a cut with force control switched on
+//! over the socket on a virtual clock, the force-control command's errors,
+//! and the wake-up latency figures of a wall-clock servo.
+
+mod support;
+
+use kerf::client::{Client, ClientError};
+use kerf::protocol::{Command, ErrorCode, Event, ProgramState, Status};
+use kerf_io::sim::cutting::CuttingConfig;
+use support::Kerfd;
+
+const ALUMINIUM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/aluminium-step.toml");
+
+fn status(client: &mut Client) -> Status {
+    serde_json::from_value(client.request(&Command::Status).unwrap()).unwrap()
+}
+
+/// Follow status events until `done` says so.
+fn follow(client: &mut Client, mut done: impl FnMut(&Status) -> bool) -> Status {
+    client
+        .request(&Command::Subscribe {
+            rate_hz: Some(50.0),
+            fields: Default::default(),
+            events: false,
+        })
+        .unwrap();
+    loop {
+        if let Event::Status { status } = client.next_event().unwrap() {
+            if done(&status) {
+                client.request(&Command::Unsubscribe).unwrap();
+                return status;
+            }
+        }
+    }
+}
+
+fn refusal(e: ClientError) -> (ErrorCode, String) {
+    match e {
+        ClientError::Refused { code, message } => (code, message),
+        other => panic!("expected a refusal, got {other}"),
+    }
+}
+
+#[test]
+fn virtual_clock_cut_with_force_control_from_the_socket() {
+    let kerfd = Kerfd::start(&["--virtual-clock", "--machine", ALUMINIUM]);
+    let mut client = kerfd.ready_client();
+    let start = status(&mut client);
+    assert_eq!(start.servo.clock, "virtual");
+    assert_eq!(
+        start.servo.latency.samples, 0,
+        "nothing to measure on a virtual clock"
+    );
+    let force = start.force.unwrap();
+    assert!(!force.enabled && force.target_n.is_none());
+
+    // Off → on needs a target (the machine configures none).
+    let (code, message) = refusal(
+        client
+            .request(&Command::ForceControl {
+                enabled: true,
+                target_n: None,
+            })
+            .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(message.contains("target_n"), "{message}");
+    let (code, _) = refusal(
+        client
+            .request(&Command::ForceControl {
+                enabled: true,
+                target_n: Some(-5.0),
+            })
+            .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    let reply = client
+        .request(&Command::ForceControl {
+            enabled: true,
+            target_n: Some(250.0),
+        })
+        .unwrap();
+    assert_eq!(reply["target_n"], 250.0);
+    let on = follow(&mut client, |s| s.force.is_some_and(|f| f.enabled));
+    assert_eq!(on.force.unwrap().target_n, Some(250.0));
+
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/examples/aluminium-step.ngc"
+    ))
+    .unwrap();
+    let program = kerfd.program("cut.ngc", &text);
+    let reply = client
+        .request(&Command::Run {
+            path: Some(program.display().to_string()),
+            line: None,
+        })
+        .unwrap();
+    let id = reply["program"].as_u64().unwrap() as u32;
+    let end = follow(&mut client, |s| {
+        s.program
+            .as_ref()
+            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
+    });
+    let p = end.program.as_ref().unwrap();
+    assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);
+    // The slot ended 4 mm deep at 300 mm/min programmed; the force is
+    // proportional to the feed, so holding 250 N takes the override
+    // 250 N / F(300 mm/min, 4 mm), with F from the process model.
+    let hal: kerf_io::HalConfig = kerf_machines::load(ALUMINIUM)
+        .unwrap()
+        .description
+        .hal
+        .try_into()
+        .unwrap();
+    let cut: CuttingConfig = hal.sim.cutting.unwrap();
+    let want = 250.0 / cut.force(300.0 / 2000.0, 4.0, 1.0);
+    let got = end.force.unwrap().feed_override;
+    assert!(
+        (got - want).abs() < 0.05 * want,
+        "override {got}, want {want}"
+    );
+    // Off again: the controller lets go of the feed.
+    client
+        .request(&Command::ForceControl {
+            enabled: false,
+            target_n: None,
+        })
+        .unwrap();
+    let off = follow(&mut client, |s| s.force.is_some_and(|f| !f.enabled));
+    assert_eq!(off.force.unwrap().feed_override, 1.0);
+}
+
+#[test]
+fn force_control_on_a_machine_without_a_controller_is_refused() {
+    let kerfd = Kerfd::start(&["--virtual-clock"]);
+    let mut client = Client::connect(&kerfd.socket).unwrap();
+    assert!(status(&mut client).force.is_none());
+    let (code, message) = refusal(
+        client
+            .request(&Command::ForceControl {
+                enabled: true,
+                target_n: Some(100.0),
+            })
+            .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(
+        message.contains("mill3 has no force controller"),
+        "{message}"
+    );
+}
+
+#[test]
+fn wall_clock_status_reports_wake_up_latency() {
+    // The figures depend on this machine's load: they are reported, and
+    // only their consistency is checked here.
+    let kerfd = Kerfd::start(&[]);
+    let mut client = Client::connect(&kerfd.socket).unwrap();
+    let s = follow(&mut client, |s| s.servo.latency.samples > 0);
+    assert_eq!(s.servo.clock, "wall");
+    let l = s.servo.latency;
+    assert!(
+        l.min_us <= l.median_us
+            && l.median_us <= l.p99_us
+            && l.p99_us <= l.p999_us
+            && l.p999_us <= l.max_us,
+        "{l:?}"
+    );
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args([
+            "--socket",
+            kerfd.socket.to_str().unwrap(),
+            "status",
+            "--latency",
+        ])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{text}");
+    assert!(
+        text.contains("latency   min") && text.contains("p99.9"),
+        "{text}"
+    );
+    assert!(text.contains("realtime  SCHED_FIFO"), "{text}");
+}
