@@ -396,9 +396,12 @@ pub trait Environment {
 }
 
 /// The environment of offline interpretation, modelled on LinuxCNC's
-/// stand-alone interpreter: a probe trips at its programmed end and the
-/// machine backs off 0.254 mm towards the start; inputs read their
-/// defaults; parameters are kept only if a parameter file is given.
+/// stand-alone interpreter: a probe move reaches its programmed end, which
+/// becomes the recorded probe position, and the machine backs off 0.254 mm
+/// towards the start; #5070 reads 0 (not tripped), as rs274 reports, so
+/// programs that loop until a probe trips behave as they do under rs274;
+/// inputs read their defaults; parameters are kept only if a parameter file
+/// is given.
 #[derive(Clone, Debug, Default)]
 pub struct Offline {
     /// Where to save the parameters at program end, if anywhere.
@@ -417,7 +420,7 @@ impl Environment for Offline {
             }
         }
         ProbeOutcome {
-            tripped: true,
+            tripped: false,
             trip_position: end,
             final_position: Position::from_array(stop),
         }
@@ -456,7 +459,7 @@ mod tests {
                 error_if_no_trip: true,
             },
         );
-        assert!(out.tripped);
+        assert!(!out.tripped);
         assert_eq!(out.trip_position, Position::ZERO);
         assert!((out.final_position.z - 0.254).abs() < 1e-12);
     }

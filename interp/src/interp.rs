@@ -313,9 +313,10 @@ pub(crate) struct Interp<'a> {
     pub line_text_override: Option<String>,
 }
 
-/// Version reported by `#<_vmajor>` and `#<_vminor>` (the LinuxCNC release
-/// whose language this interpreter follows).
-const VERSION: (f64, f64) = (2.0, 9.0);
+/// Version reported by `#<_vmajor>` and `#<_vminor>`. LinuxCNC reads its
+/// package version "2.9.0" with `sscanf("%lf%lf")`, which yields 2.9 and
+/// 0.0; programs test `_vmajor` against 2.9, so kerf reports the same pair.
+const VERSION: (f64, f64) = (2.9, 0.0);
 
 impl<'a> Interp<'a> {
     pub fn new(
@@ -359,7 +360,7 @@ impl<'a> Interp<'a> {
             feed_rate: 0.0,
             plane: Plane::XY,
             motion_mode: g::G80,
-            retract_mode: Retract::OldZ,
+            retract_mode: Retract::RPlane,
             control_mode: MotionMode::Continuous { tolerance: 0.0 },
             tolerance: 0.0,
             naivecam_tolerance: 0.0,
