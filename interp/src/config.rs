@@ -162,9 +162,10 @@ pub struct Config {
     pub no_downcase_oword: bool,
     /// Added to the M19 R angle, degrees.
     pub orient_offset: f64,
-    /// Largest distance the centre of an arc given with I J K may be off,
-    /// inch and mm.
+    /// Largest difference between the start and end radius of an arc
+    /// given with I J K, inches (for G20 programs).
     pub center_arc_radius_tolerance_inch: f64,
+    /// The same in mm (for G21 programs).
     pub center_arc_radius_tolerance_mm: f64,
     /// Rotary axes A B C that wrap at 360°.
     pub wrapped_rotary: [bool; 3],

@@ -15,6 +15,7 @@
 // Positions are parallel arrays indexed by axis (X..W); index loops over
 // them read more plainly than zipped iterators.
 #![allow(clippy::needless_range_loop)]
+#![warn(missing_docs)]
 
 mod block;
 pub mod canon;

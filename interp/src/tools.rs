@@ -23,6 +23,7 @@ pub struct ToolTable {
 pub struct ToolTableError {
     /// 1-based line number.
     pub line: usize,
+    /// What is wrong with it.
     pub message: String,
 }
 
