@@ -9,28 +9,9 @@
 use crate::block::{g, g_group, gm, is_cycle, m_group, Block, CallType, OType, SUB_PARAMS};
 use crate::error::{chk, Fault, R};
 use crate::interp::{Interp, Side};
+use crate::lex::{self, Func, Op};
 
-/// Binary operators, with LinuxCNC's precedence.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Op {
-    RightBracket,
-    DividedBy,
-    Modulo,
-    Power,
-    Times,
-    And,
-    Xor,
-    Minus,
-    Or,
-    Plus,
-    Lt,
-    Eq,
-    Ne,
-    Le,
-    Ge,
-    Gt,
-}
-
+/// LinuxCNC's operator precedence (higher binds tighter).
 fn precedence(op: Op) -> u8 {
     match op {
         Op::RightBracket => 1,
@@ -40,25 +21,6 @@ fn precedence(op: Op) -> u8 {
         Op::DividedBy | Op::Modulo | Op::Times => 5,
         Op::Power => 6,
     }
-}
-
-/// Unary functions.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Func {
-    Abs,
-    Acos,
-    Asin,
-    Atan,
-    Cos,
-    Exp,
-    Exists,
-    Fix,
-    Fup,
-    Ln,
-    Round,
-    Sin,
-    Sqrt,
-    Tan,
 }
 
 /// Two numbers are equal for EQ and NE if they differ by less than this.
@@ -369,14 +331,12 @@ impl Interp<'_> {
     }
 
     fn read_comment(&mut self, counter: &mut usize, block: &mut Block) -> R {
-        *counter += 1;
-        let start = *counter;
-        while *counter < self.line.len() && self.ch(*counter) != b')' {
-            *counter += 1;
-        }
-        let text = String::from_utf8_lossy(&self.line[start..*counter]).into_owned();
-        block.comment = Some(text);
-        *counter += 1;
+        // The line was folded, so every `(` has its `)`.
+        let rest = &self.line[*counter..];
+        let (after, body) =
+            lex::comment(rest).map_err(|_| self.fault_at(*counter, "Unclosed comment found"))?;
+        block.comment = Some(String::from_utf8_lossy(body).into_owned());
+        *counter += rest.len() - after.len();
         Ok(())
     }
 
@@ -477,20 +437,12 @@ impl Interp<'_> {
 
     fn read_integer_unsigned(&mut self, counter: &mut usize) -> R<i64> {
         let start = *counter;
-        let mut n = start;
-        while self.ch(n).is_ascii_digit() {
-            n += 1;
-        }
-        if n == start {
-            return Err(self.fault_at(start, "Bad format unsigned integer"));
-        }
-        let mut v: i64 = 0;
-        for i in start..n {
-            v = v
-                .saturating_mul(10)
-                .saturating_add((self.ch(i) - b'0') as i64);
-        }
-        *counter = n;
+        let (_, digits) = lex::unsigned_integer(&self.line[start..])
+            .map_err(|_| self.fault_at(start, "Bad format unsigned integer"))?;
+        let v = digits.iter().fold(0i64, |v, &d| {
+            v.saturating_mul(10).saturating_add((d - b'0') as i64)
+        });
+        *counter = start + digits.len();
         Ok(v.min(i32::MAX as i64))
     }
 
@@ -543,43 +495,23 @@ impl Interp<'_> {
     /// stream extraction reads them.
     fn read_real_number(&mut self, counter: &mut usize) -> R<f64> {
         let start = *counter;
-        let mut end = start;
-        while matches!(self.ch(end), b'+' | b'-') {
-            end += 1;
-        }
-        while matches!(self.ch(end), b'0'..=b'9' | b'.') {
-            end += 1;
-        }
-        let text = &self.line[start..end];
-        let shown = || String::from_utf8_lossy(text).into_owned();
-        // One optional sign, then digits with at most one point.
-        let mut i = 0;
-        if i < text.len() && (text[i] == b'+' || text[i] == b'-') {
-            i += 1;
-        }
-        let body_start = i;
-        let mut digits = 0;
-        while i < text.len() && text[i].is_ascii_digit() {
-            i += 1;
-            digits += 1;
-        }
-        if i < text.len() && text[i] == b'.' {
-            i += 1;
-            while i < text.len() && text[i].is_ascii_digit() {
-                i += 1;
-                digits += 1;
-            }
-        }
-        if digits == 0 {
-            return Err(self.fault_at(
+        // LinuxCNC takes the run of signs, digits and points, then asks the
+        // converter to read all of it: one sign and one decimal.
+        let span = match lex::number_span(&self.line[start..]) {
+            Ok((_, span)) => span,
+            Err(_) => &[],
+        };
+        let shown = || String::from_utf8_lossy(span).into_owned();
+        let (rest, (negative, body)) = lex::signed_decimal(span).map_err(|_| {
+            self.fault_at(
                 start,
                 format!(
                     "bad number format (conversion failed) parsing '{}'",
                     shown()
                 ),
-            ));
-        }
-        if i != text.len() {
+            )
+        })?;
+        if !rest.is_empty() {
             return Err(self.fault_at(
                 start,
                 format!(
@@ -588,12 +520,9 @@ impl Interp<'_> {
                 ),
             ));
         }
-        let mut v: f64 = fast_parse(&text[body_start..i]);
-        if text[0] == b'-' {
-            v = -v;
-        }
-        *counter = end;
-        Ok(v)
+        let v = fast_parse(body);
+        *counter = start + span.len();
+        Ok(if negative { -v } else { v })
     }
 
     fn read_real_expression(&mut self, counter: &mut usize) -> R<f64> {
@@ -627,136 +556,44 @@ impl Interp<'_> {
 
     fn read_operation(&mut self, counter: &mut usize) -> R<Op> {
         let at = *counter;
-        let c = self.ch(at);
-        *counter += 1;
-        let next = self.ch(*counter);
-        let next2 = self.ch(*counter + 1);
-        let mut two = |op: Op, a: u8, b: u8, msg: &str| -> R<Op> {
-            if next == a && next2 == b {
-                *counter += 2;
-                Ok(op)
-            } else {
-                Err(self.fault_at(at, msg))
-            }
+        let rest = &self.line[at..];
+        if let Ok((after, op)) = lex::operation(rest) {
+            *counter += rest.len() - after.len();
+            return Ok(op);
+        }
+        let message = match self.ch(at) {
+            0 => "Unclosed expression",
+            b'a' => "Unknown operation name starting with a",
+            b'm' => "Unknown operation name starting with m",
+            b'x' => "Unknown operation name starting with x",
+            b'o' => "Unknown operation name starting with o",
+            b'e' => "Unknown operation name starting with e",
+            b'n' => "Unknown operation name starting with n",
+            b'g' => "Unknown operation name starting with g",
+            b'l' => "Unknown operation name starting with l",
+            _ => "Unknown operation",
         };
-        Ok(match c {
-            b'+' => Op::Plus,
-            b'-' => Op::Minus,
-            b'/' => Op::DividedBy,
-            b'*' => {
-                if next == b'*' {
-                    *counter += 1;
-                    Op::Power
-                } else {
-                    Op::Times
-                }
-            }
-            b']' => Op::RightBracket,
-            b'a' => two(
-                Op::And,
-                b'n',
-                b'd',
-                "Unknown operation name starting with a",
-            )?,
-            b'm' => two(
-                Op::Modulo,
-                b'o',
-                b'd',
-                "Unknown operation name starting with m",
-            )?,
-            b'x' => two(
-                Op::Xor,
-                b'o',
-                b'r',
-                "Unknown operation name starting with x",
-            )?,
-            b'o' => {
-                if next == b'r' {
-                    *counter += 1;
-                    Op::Or
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with o"));
-                }
-            }
-            b'e' => {
-                if next == b'q' {
-                    *counter += 1;
-                    Op::Eq
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with e"));
-                }
-            }
-            b'n' => {
-                if next == b'e' {
-                    *counter += 1;
-                    Op::Ne
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with n"));
-                }
-            }
-            b'g' => match next {
-                b'e' => {
-                    *counter += 1;
-                    Op::Ge
-                }
-                b't' => {
-                    *counter += 1;
-                    Op::Gt
-                }
-                _ => return Err(self.fault_at(at, "Unknown operation name starting with g")),
-            },
-            b'l' => match next {
-                b'e' => {
-                    *counter += 1;
-                    Op::Le
-                }
-                b't' => {
-                    *counter += 1;
-                    Op::Lt
-                }
-                _ => return Err(self.fault_at(at, "Unknown operation name starting with l")),
-            },
-            0 => return Err(self.fault_at(at, "Unclosed expression")),
-            _ => return Err(self.fault_at(at, "Unknown operation")),
-        })
-    }
-
-    fn starts(&self, at: usize, word: &[u8]) -> bool {
-        self.line.get(at..at + word.len()) == Some(word)
+        Err(self.fault_at(at, message))
     }
 
     fn read_unary(&mut self, counter: &mut usize) -> R<f64> {
         let at = *counter;
-        let c = self.ch(at);
-        let p = at + 1;
-        let (func, len) = match c {
-            b'a' if self.starts(p, b"bs") => (Func::Abs, 2),
-            b'a' if self.starts(p, b"cos") => (Func::Acos, 3),
-            b'a' if self.starts(p, b"sin") => (Func::Asin, 3),
-            b'a' if self.starts(p, b"tan") => (Func::Atan, 3),
-            b'a' => return Err(self.fault_at(at, "Unknown word starting with a")),
-            b'c' if self.starts(p, b"os") => (Func::Cos, 2),
-            b'c' => return Err(self.fault_at(at, "Unknown word starting with c")),
-            b'e' if self.starts(p, b"xp") => (Func::Exp, 2),
-            b'e' if self.starts(p, b"xists") => (Func::Exists, 5),
-            b'e' => return Err(self.fault_at(at, "Unknown word starting with e")),
-            b'f' if self.starts(p, b"ix") => (Func::Fix, 2),
-            b'f' if self.starts(p, b"up") => (Func::Fup, 2),
-            b'f' => return Err(self.fault_at(at, "Unknown word starting with f")),
-            b'l' if self.starts(p, b"n") => (Func::Ln, 1),
-            b'l' => return Err(self.fault_at(at, "Unknown word starting with l")),
-            b'r' if self.starts(p, b"ound") => (Func::Round, 4),
-            b'r' => return Err(self.fault_at(at, "Unknown word starting with r")),
-            b's' if self.starts(p, b"in") => (Func::Sin, 2),
-            b's' if self.starts(p, b"qrt") => (Func::Sqrt, 3),
-            b's' => return Err(self.fault_at(at, "Unknown word starting with s")),
-            b't' if self.starts(p, b"an") => (Func::Tan, 2),
-            b't' => return Err(self.fault_at(at, "Unknown word starting with t")),
-            _ => {
-                return Err(self.fault_at(at, "Unknown word where unary operation could be"));
+        let rest = &self.line[at..];
+        let func = match lex::function(rest) {
+            Ok((after, func)) => {
+                *counter += rest.len() - after.len();
+                func
+            }
+            Err(_) => {
+                let c = self.ch(at);
+                let message = if b"acefflrst".contains(&c) {
+                    format!("Unknown word starting with {}", c as char)
+                } else {
+                    "Unknown word where unary operation could be".to_string()
+                };
+                return Err(self.fault_at(at, message));
             }
         };
-        *counter = p + len;
         if self.ch(*counter) != b'[' {
             return Err(self.fault_at(*counter, "Left bracket missing after unary operation name"));
         }
@@ -823,17 +660,11 @@ impl Interp<'_> {
     /// `<name>`: the characters up to `>`.
     fn read_name(&mut self, counter: &mut usize) -> R<String> {
         let start = *counter;
-        *counter += 1;
-        let from = *counter;
-        while *counter < self.line.len() {
-            if self.ch(*counter) == b'>' {
-                let name = String::from_utf8_lossy(&self.line[from..*counter]).into_owned();
-                *counter += 1;
-                return Ok(name);
-            }
-            *counter += 1;
-        }
-        Err(self.fault_at(start, "Named parameter not terminated"))
+        let rest = &self.line[start..];
+        let (after, name) = lex::bracketed_name(rest)
+            .map_err(|_| self.fault_at(start, "Named parameter not terminated"))?;
+        *counter += rest.len() - after.len();
+        Ok(String::from_utf8_lossy(name).into_owned())
     }
 
     fn read_parameter_setting(&mut self, counter: &mut usize, block: &mut Block) -> R {
@@ -916,31 +747,14 @@ impl Interp<'_> {
                 let v = self.read_integer_value(counter)?;
                 name = v.to_string();
             }
-            const WORDS: [(&[u8], OType); 15] = [
-                (b"sub", OType::Sub),
-                (b"endsub", OType::EndSub),
-                (b"call", OType::Call),
-                (b"do", OType::Do),
-                (b"while", OType::While),
-                (b"repeat", OType::Repeat),
-                (b"if", OType::If),
-                (b"elseif", OType::ElseIf),
-                (b"else", OType::Else),
-                (b"endif", OType::EndIf),
-                (b"break", OType::Break),
-                (b"continue", OType::Continue),
-                (b"endwhile", OType::EndWhile),
-                (b"endrepeat", OType::EndRepeat),
-                (b"return", OType::Return),
-            ];
-            block.o_type = OType::None;
-            for (word, kind) in WORDS {
-                if self.starts(*counter, word) {
-                    *counter += word.len();
-                    block.o_type = kind;
-                    break;
+            let rest = &self.line[*counter..];
+            block.o_type = match lex::o_keyword(rest) {
+                Ok((after, kind)) => {
+                    *counter += rest.len() - after.len();
+                    kind
                 }
-            }
+                Err(_) => OType::None,
+            };
             if block.o_type == OType::None {
                 let c = self.ch(*counter);
                 if c == b'(' || c == b';' || c == 0 {
