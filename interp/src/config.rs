@@ -77,7 +77,7 @@ impl Remap {
             .next()
             .map(|c| c.to_ascii_lowercase())
             .ok_or("empty code")?;
-        let rest = &name[1..];
+        let rest = &name[letter.len_utf8()..];
         let number = match letter {
             't' | 's' | 'f' => {
                 if !rest.is_empty() {
@@ -186,6 +186,10 @@ pub struct Config {
     /// After an error, report it and go on with the next line (as
     /// `rs274 -n 0` does) instead of stopping.
     pub continue_after_error: bool,
+    /// Stop with an error after reading this many lines in all (counting
+    /// every pass of a loop): a guard against runaway loops for callers
+    /// that cannot wait forever, such as the fuzz tests. `None`: no limit.
+    pub line_limit: Option<u64>,
 }
 
 impl Default for Config {
@@ -219,6 +223,7 @@ impl Default for Config {
             start_position: Position::ZERO,
             spindle_tool_index: 0,
             continue_after_error: false,
+            line_limit: None,
         }
     }
 }

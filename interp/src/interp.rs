@@ -192,6 +192,8 @@ pub(crate) struct Interp<'a> {
     pub cur_file: usize,
     /// Line number of the line last read in the current file.
     pub sequence_number: u32,
+    /// Lines read in all, for [`Config::line_limit`].
+    pub lines_read: u64,
     /// The line as read, trailing blanks removed.
     pub raw: Vec<u8>,
     /// The line folded: lower case, blanks removed outside comments.
@@ -337,6 +339,7 @@ impl<'a> Interp<'a> {
             }],
             cur_file: 0,
             sequence_number: 0,
+            lines_read: 0,
             raw: Vec::with_capacity(256),
             line: Vec::with_capacity(256),
             cols: Vec::with_capacity(256),
@@ -587,7 +590,8 @@ impl<'a> Interp<'a> {
         };
         InterpError {
             file: self.files[self.cur_file].name.clone(),
-            line: self.sequence_number,
+            // An empty file has no line 0 to point at; its end is line 1.
+            line: self.sequence_number.max(1),
             column,
             word,
             message: f.message,
@@ -774,6 +778,13 @@ impl<'a> Interp<'a> {
             bail!("File ended with no percent sign or program end");
         }
         self.sequence_number += 1;
+        self.lines_read += 1;
+        if let Some(limit) = self.cfg.line_limit {
+            chk!(
+                self.lines_read > limit,
+                "Program stopped: it read more than the line limit of {limit} lines"
+            );
+        }
         self.line_n = block_number_of(&self.raw);
         self.close_and_downcase()?;
         if self.line == b"%" && self.percent_flag {
@@ -938,7 +949,7 @@ fn block_number_of(raw: &[u8]) -> Option<BlockNumber> {
     }
 }
 
-use crate::error::bail;
+use crate::error::{bail, chk};
 
 // ----------------------------------------------------------------------
 // The public interpreter.

@@ -132,7 +132,10 @@ impl Interp<'_> {
         let mut col: u32 = 0;
         for i in 0..self.raw.len() {
             let c = self.raw[i];
-            if c & 0xC0 != 0x80 {
+            // Columns count characters: UTF-8 continuation bytes belong to
+            // the character before them (a stray one at the start still
+            // takes column 1).
+            if c & 0xC0 != 0x80 || col == 0 {
                 col += 1;
             }
             if c == b';' && !comment {
