@@ -1010,16 +1010,7 @@ impl Interpreter<'static> {
 
     /// Interpret program text held in memory, naming it `file`.
     pub fn from_text(text: impl Into<String>, file: impl Into<Arc<str>>, start: Position) -> Self {
-        Interpreter::with_source(
-            Box::new(Cursor::new(text.into().into_bytes())),
-            file,
-            None,
-            Config {
-                start_position: start,
-                ..Config::default()
-            },
-            Box::new(Offline::default()),
-        )
+        Interpreter::new(Cursor::new(text.into().into_bytes()), file, start)
     }
 }
 

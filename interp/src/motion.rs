@@ -112,6 +112,10 @@ impl Interp<'_> {
             }
             return Ok(e);
         }
+        chk!(
+            (b.radius.is_some() || b.theta.is_some()) && (b.has(b'x') || b.has(b'y')),
+            "Cannot specify X or Y words with polar coordinate"
+        );
         if self.distance_mode == Distance::Absolute {
             e[X] = b.get(b'x').unwrap_or(if comp && middle {
                 self.program[0]
@@ -127,18 +131,10 @@ impl Interp<'_> {
                 });
             match (b.radius, b.theta) {
                 (Some(r), Some(t)) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     e[X] = r * t.to_radians().cos();
                     e[Y] = r * t.to_radians().sin();
                 }
                 (Some(r), None) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     chk!(
                         e[Y] == 0.0 && e[X] == 0.0,
                         "Must specify angle in polar coordinate if at the origin"
@@ -148,10 +144,6 @@ impl Interp<'_> {
                     e[Y] = r * theta.sin();
                 }
                 (None, Some(t)) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     let radius = e[Y].hypot(e[X]);
                     e[X] = radius * t.to_radians().cos();
                     e[Y] = radius * t.to_radians().sin();
@@ -187,10 +179,6 @@ impl Interp<'_> {
             }) + b.or(b'y', 0.0);
             if let Some(r) = b.radius {
                 chk!(
-                    b.has(b'x') || b.has(b'y'),
-                    "Cannot specify X or Y words with polar coordinate"
-                );
-                chk!(
                     e[Y] == 0.0 && e[X] == 0.0,
                     "Incremental motion with polar coordinates is indeterminate when at the origin"
                 );
@@ -200,10 +188,6 @@ impl Interp<'_> {
                 e[Y] = radius * theta.sin();
             }
             if let Some(t) = b.theta {
-                chk!(
-                    b.has(b'x') || b.has(b'y'),
-                    "Cannot specify X or Y words with polar coordinate"
-                );
                 chk!(
                     e[Y] == 0.0 && e[X] == 0.0,
                     "G91 motion with polar coordinates is indeterminate when at the origin"
@@ -404,25 +388,13 @@ impl Interp<'_> {
                 self.cur = end;
             }
             g::G33 => {
-                self.check_synced_spindle("G33", b)?;
-                let k = b.or(b'k', 0.0);
-                self.emit(CanonCmd::StartSpeedFeedSync {
-                    spindle: self.active_spindle,
-                    mm_per_rev: self.len_mm(k),
-                    velocity_mode: false,
-                });
+                self.start_position_sync("G33", b)?;
                 self.canon_straight_feed(end);
                 self.emit(CanonCmd::StopSpeedFeedSync);
                 self.cur = end;
             }
             g::G33_1 => {
-                self.check_synced_spindle("G33.1", b)?;
-                let k = b.or(b'k', 0.0);
-                self.emit(CanonCmd::StartSpeedFeedSync {
-                    spindle: self.active_spindle,
-                    mm_per_rev: self.len_mm(k),
-                    velocity_mode: false,
-                });
+                self.start_position_sync("G33.1", b)?;
                 let scale = b.get(b'i').map(|i| i.max(1.0)).unwrap_or(1.0);
                 self.canon_rigid_tap(end, scale);
                 self.emit(CanonCmd::StopSpeedFeedSync);
@@ -438,6 +410,19 @@ impl Interp<'_> {
             }
         }
         self.cur[3..9].copy_from_slice(&rest);
+        Ok(())
+    }
+
+    /// Check the spindle for `code` and lock following moves to it at K
+    /// program units per revolution.
+    fn start_position_sync(&mut self, code: &str, b: &Block) -> R {
+        self.check_synced_spindle(code, b)?;
+        let k = b.or(b'k', 0.0);
+        self.emit(CanonCmd::StartSpeedFeedSync {
+            spindle: self.active_spindle,
+            mm_per_rev: self.len_mm(k),
+            velocity_mode: false,
+        });
         Ok(())
     }
 

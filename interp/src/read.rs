@@ -912,14 +912,7 @@ impl Interp<'_> {
                     (polar || axis_flag) && !covets,
                     "Cannot use axis values with g80"
                 );
-                chk!(
-                    polar && mode0 == g::G92,
-                    "Polar coordinates can only be used for motion"
-                );
-                chk!(
-                    !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
-                    "All axes missing with g52 or g92"
-                );
+                check_offset_words(mode0, polar, axis_flag)?;
             } else {
                 chk!(covets, "Cannot use two g codes that both use axis values");
                 chk!(
@@ -946,14 +939,7 @@ impl Interp<'_> {
             }
             block.motion_to_be = mode1;
         } else if covets {
-            chk!(
-                polar && mode0 == g::G92,
-                "Polar coordinates can only be used for motion"
-            );
-            chk!(
-                !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
-                "All axes missing with g52 or g92"
-            );
+            check_offset_words(mode0, polar, axis_flag)?;
         } else if axis_flag || polar {
             let tlo = block.g_modes[gm::TOOL_LENGTH_OFFSET];
             chk!(
@@ -1223,6 +1209,19 @@ impl Interp<'_> {
         }
         Ok(())
     }
+}
+
+/// G52 and G92 need axis words, and plain ones.
+fn check_offset_words(mode0: i32, polar: bool, axis_flag: bool) -> R {
+    chk!(
+        polar && mode0 == g::G92,
+        "Polar coordinates can only be used for motion"
+    );
+    chk!(
+        !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
+        "All axes missing with g52 or g92"
+    );
+    Ok(())
 }
 
 /// Parse an unsigned decimal number of digits and at most one point.
