@@ -635,6 +635,8 @@ fn a_program_without_an_end_is_reported() {
 
 #[test]
 fn unsupported_codes_are_refused_clearly() {
-    let e = error("S100 M3\nG76 P0.05 Z-0.5 I-0.075 J0.008 K0.045\nM2\n");
+    let e = error("G5.1 X1 Y1 I1 J1 F100\nM2\n");
+    assert!(e.contains("not supported"), "{e}");
+    let e = error("G0 X10 Z0\nG71 Q2 D0.5\nM2\n");
     assert!(e.contains("not supported"), "{e}");
 }
