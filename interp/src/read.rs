@@ -297,12 +297,20 @@ impl Interp<'_> {
                 column: Some(self.col_at(start)),
             });
         }
-        let mut value = self.read_real_value(counter)?;
-        match letter {
-            b'f' => chk!(value < 0.0, "Negative f word used"),
-            b's' => chk!(value < 0.0, "Negative spindle speed used"),
-            b'x' if self.lathe_diameter_mode => value /= 2.0,
-            _ => {}
+        let word = || (letter.to_ascii_uppercase() as char).to_string();
+        let mut value = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(word, col))?;
+        let negative = match letter {
+            b'f' => Some("Negative f word used"),
+            b's' => Some("Negative spindle speed used"),
+            _ => None,
+        };
+        if let Some(message) = negative.filter(|_| value < 0.0) {
+            return Err(Fault::new(message).in_word(word, col));
+        }
+        if letter == b'x' && self.lathe_diameter_mode {
+            value /= 2.0;
         }
         block.set(letter, value);
         block.cols[(letter - b'a') as usize] = col;
@@ -321,12 +329,18 @@ impl Interp<'_> {
                 column: Some(self.col_at(start)),
             });
         }
-        let value = self.read_integer_value(counter)?;
-        match letter {
-            b'h' => chk!(value < -1, "Negative h word used"),
-            b'l' => chk!(value < 0, "Negative l word used"),
-            b't' => chk!(value < 0, "Negative tool id (tool not found)"),
-            _ => {}
+        let word = || (letter.to_ascii_uppercase() as char).to_string();
+        let value = self
+            .read_integer_value(counter)
+            .map_err(|f| f.in_word(word, col))?;
+        let negative = match letter {
+            b'h' => (value < -1).then_some("Negative h word used"),
+            b'l' => (value < 0).then_some("Negative l word used"),
+            b't' => (value < 0).then_some("Negative tool id (tool not found)"),
+            _ => None,
+        };
+        if let Some(message) = negative {
+            return Err(Fault::new(message).in_word(word, col));
         }
         block.set(letter, value as f64);
         block.cols[(letter - b'a') as usize] = col;
@@ -346,7 +360,10 @@ impl Interp<'_> {
     fn read_g(&mut self, counter: &mut usize, block: &mut Block) -> R {
         let col = self.col_at(*counter);
         *counter += 1;
-        let read = self.read_real_value(counter)? * 10.0;
+        let read = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(|| "G".into(), col))?
+            * 10.0;
         let mut value = read.floor() as i64;
         if read - value as f64 > 0.999 {
             value = read.ceil() as i64;
@@ -395,7 +412,9 @@ impl Interp<'_> {
     fn read_m(&mut self, counter: &mut usize, block: &mut Block) -> R {
         let col = self.col_at(*counter);
         *counter += 1;
-        let value = self.read_integer_value(counter)?;
+        let value = self
+            .read_integer_value(counter)
+            .map_err(|f| f.in_word(|| "M".into(), col))?;
         let at = |message: String| Fault {
             message,
             word: Some(format!("M{value}")),
@@ -671,15 +690,20 @@ impl Interp<'_> {
     }
 
     fn read_parameter_setting(&mut self, counter: &mut usize, block: &mut Block) -> R {
+        let col = self.col_at(*counter);
         *counter += 1;
         if self.ch(*counter) == b'<' {
             let name = self.read_name(counter)?;
-            self.add_named_param(&name, false)?;
+            let word = || format!("#<{name}>");
+            self.add_named_param(&name, false)
+                .map_err(|f| f.in_word(word, col))?;
             if self.ch(*counter) != b'=' {
                 return Err(self.fault_at(*counter, "Equal sign missing in parameter setting"));
             }
             *counter += 1;
-            let value = self.read_real_value(counter)?;
+            let value = self
+                .read_real_value(counter)
+                .map_err(|f| f.in_word(word, col))?;
             block.assign_named.push((name, value));
             return Ok(());
         }
@@ -695,7 +719,9 @@ impl Interp<'_> {
             return Err(self.fault_at(*counter, "Equal sign missing in parameter setting"));
         }
         *counter += 1;
-        let value = self.read_real_value(counter)?;
+        let value = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(|| format!("#{index}"), col))?;
         block.assign_numbered.push((index as usize, value));
         Ok(())
     }
