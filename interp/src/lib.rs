@@ -28,6 +28,7 @@ mod exec;
 mod g7x;
 pub mod ini;
 mod interp;
+mod ld;
 mod lex;
 pub mod linuxcnc;
 mod motion;

@@ -2,8 +2,6 @@
 //! arcs (centre or radius format, full circles, helices, P turns), probes,
 //! spindle-synchronised moves, and the inverse-time feed rates they need.
 
-use std::f64::consts::FRAC_PI_2;
-
 use crate::block::{g, gm, is_cycle, round_to_int, Block};
 use crate::canon::{CanonCmd, Plane, ProbeKind, Units};
 use crate::emit::rotate;
@@ -685,11 +683,10 @@ impl Interp<'_> {
         if half_length / abs_radius > 1.0 - TINY {
             half_length = abs_radius;
         }
-        let theta = if (mv == g::G2 && radius > 0.0) || (mv == g::G3 && radius < 0.0) {
-            (ey - cy).atan2(ex - cx) - FRAC_PI_2
-        } else {
-            (ey - cy).atan2(ex - cx) + FRAC_PI_2
-        };
+        // LinuxCNC adds the long double M_PI_2l; rounding the same way keeps
+        // centres that land on zero on the same side.
+        let clockwise_short = (mv == g::G2 && radius > 0.0) || (mv == g::G3 && radius < 0.0);
+        let theta = crate::ld::add_half_pi((ey - cy).atan2(ex - cx), clockwise_short);
         let turn2 = (half_length / abs_radius).asin();
         let offset = abs_radius * turn2.cos();
         let center = [mid_x + offset * theta.cos(), mid_y + offset * theta.sin()];

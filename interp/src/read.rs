@@ -75,13 +75,13 @@ fn unary(v: f64, f: Func) -> R<f64> {
         Func::Abs => v.abs(),
         Func::Acos => {
             chk!(!(-1.0..=1.0).contains(&v), "Argument to acos out of range");
-            v.acos().to_degrees()
+            crate::ld::degrees(v.acos())
         }
         Func::Asin => {
             chk!(!(-1.0..=1.0).contains(&v), "Argument to asin out of range");
-            v.asin().to_degrees()
+            crate::ld::degrees(v.asin())
         }
-        Func::Cos => v.to_radians().cos(),
+        Func::Cos => crate::ld::cos_deg(v),
         Func::Exp => v.exp(),
         Func::Fix => v.floor(),
         Func::Fup => v.ceil(),
@@ -93,12 +93,12 @@ fn unary(v: f64, f: Func) -> R<f64> {
             let r = v + if v < 0.0 { -0.5 } else { 0.5 };
             (r as i64) as f64
         }
-        Func::Sin => v.to_radians().sin(),
+        Func::Sin => crate::ld::sin_deg(v),
         Func::Sqrt => {
             chk!(v < 0.0, "Negative argument to sqrt");
             v.sqrt()
         }
-        Func::Tan => v.to_radians().tan(),
+        Func::Tan => crate::ld::tan_deg(v),
         Func::Exists | Func::Atan => v,
     })
 }
@@ -641,7 +641,7 @@ impl Interp<'_> {
                 return Err(self.fault_at(*counter, "Left bracket missing after slash with atan"));
             }
             let v2 = self.read_real_expression(counter)?;
-            return Ok(v.atan2(v2).to_degrees());
+            return Ok(crate::ld::degrees(v.atan2(v2)));
         }
         unary(v, func)
     }
