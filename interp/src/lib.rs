@@ -11,6 +11,14 @@
 //! every error names file, line, column and the word at fault. The
 //! [`linuxcnc`] module prints the stream in the text format of LinuxCNC's
 //! stand-alone interpreter `rs274`.
+//!
+//! Inside, a line is read as LinuxCNC reads it: folded (lower case, blanks
+//! dropped outside comments), then walked word by word, with its tokens
+//! (numbers, operators, function names, O-word keywords, `<names>`)
+//! recognised by nom parsers and its values evaluated as they are read.
+//! Blocks then execute in LinuxCNC's order, and a small canon layer turns
+//! program coordinates into machine coordinates. The language is described
+//! in `docs/gcode.md`.
 
 // Positions are parallel arrays indexed by axis (X..W); index loops over
 // them read more plainly than zipped iterators.
