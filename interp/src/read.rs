@@ -127,46 +127,62 @@ impl Interp<'_> {
     pub(crate) fn close_and_downcase(&mut self) -> R {
         self.line.clear();
         self.cols.clear();
-        let mut comment = false;
-        let mut semicomment = false;
+        let raw = &self.raw;
+        self.line.reserve(raw.len());
+        self.cols.reserve(raw.len());
         let mut col: u32 = 0;
-        for i in 0..self.raw.len() {
-            let c = self.raw[i];
+        let mut i = 0;
+        while i < raw.len() {
+            let c = raw[i];
+            i += 1;
             // Columns count characters: UTF-8 continuation bytes belong to
             // the character before them (a stray one at the start still
             // takes column 1).
             if c & 0xC0 != 0x80 || col == 0 {
                 col += 1;
             }
-            if c == b';' && !comment {
-                semicomment = true;
-            }
-            if semicomment {
-                self.line.push(c);
-                self.cols.push(col);
-                continue;
-            }
-            if comment {
-                self.line.push(c);
-                self.cols.push(col);
-                if c == b')' {
-                    comment = false;
-                } else if c == b'(' {
-                    return Err(Fault::at(col, "Nested comment found"));
+            match c {
+                b' ' | b'\t' | b'\r' => {}
+                b';' => {
+                    // A remark: the rest of the line as written.
+                    self.line.push(c);
+                    self.cols.push(col);
+                    for &c in &raw[i..] {
+                        if c & 0xC0 != 0x80 {
+                            col += 1;
+                        }
+                        self.line.push(c);
+                        self.cols.push(col);
+                    }
+                    return Ok(());
                 }
-            } else if c == b' ' || c == b'\t' || c == b'\r' {
-            } else if c.is_ascii_uppercase() {
-                self.line.push(c.to_ascii_lowercase());
-                self.cols.push(col);
-            } else {
-                if c == b'(' {
-                    comment = true;
+                b'(' => {
+                    // A comment, as written, up to its `)`.
+                    self.line.push(c);
+                    self.cols.push(col);
+                    loop {
+                        let Some(&c) = raw.get(i) else {
+                            return Err(Fault::new("Unclosed comment found"));
+                        };
+                        i += 1;
+                        if c & 0xC0 != 0x80 {
+                            col += 1;
+                        }
+                        self.line.push(c);
+                        self.cols.push(col);
+                        match c {
+                            b')' => break,
+                            b'(' => return Err(Fault::at(col, "Nested comment found")),
+                            _ => {}
+                        }
+                    }
                 }
-                self.line.push(c);
-                self.cols.push(col);
+                _ => {
+                    self.line.push(c.to_ascii_lowercase());
+                    self.cols.push(col);
+                }
             }
         }
-        chk!(comment, "Unclosed comment found");
         Ok(())
     }
 
