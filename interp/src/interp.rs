@@ -194,6 +194,10 @@ pub(crate) struct Interp<'a> {
     pub sequence_number: u32,
     /// Lines read in all, for [`Config::line_limit`].
     pub lines_read: u64,
+    /// The line just read was longer than LinuxCNC accepts.
+    pub line_too_long: bool,
+    /// How deeply the value being read is nested (see `read_real_value`).
+    pub value_depth: u32,
     /// The line as read, trailing blanks removed.
     pub raw: Vec<u8>,
     /// The line folded: lower case, blanks removed outside comments.
@@ -340,6 +344,8 @@ impl<'a> Interp<'a> {
             cur_file: 0,
             sequence_number: 0,
             lines_read: 0,
+            line_too_long: false,
+            value_depth: 0,
             raw: Vec::with_capacity(256),
             line: Vec::with_capacity(256),
             cols: Vec::with_capacity(256),
@@ -607,13 +613,39 @@ impl<'a> Interp<'a> {
 
     /// Read the next raw line of the current file into `self.raw`.
     /// Returns false at end of file.
+    ///
+    /// LinuxCNC reads a line into a 255-byte buffer and refuses one of 254
+    /// bytes or more (newline included) as "Command too long". kerf keeps
+    /// that limit: programs LinuxCNC runs fit it, and it bounds the memory
+    /// a line can take. The rest of a long line is read and dropped, and
+    /// `line_too_long` tells [`Interp::read`] to refuse it.
     fn read_raw_line(&mut self) -> R<bool> {
+        use std::io::Read;
+        const MAX_LINE: u64 = 254;
         self.raw.clear();
         let f = &mut self.files[self.cur_file];
-        let n = f
-            .reader
+        let name = &f.name;
+        let read_err = |e: std::io::Error| Fault::new(format!("cannot read {name}: {e}"));
+        let mut n = (&mut f.reader)
+            .take(MAX_LINE)
             .read_until(b'\n', &mut self.raw)
-            .map_err(|e| Fault::new(format!("cannot read {}: {e}", f.name)))?;
+            .map_err(read_err)?;
+        self.line_too_long = n as u64 >= MAX_LINE;
+        if self.line_too_long && self.raw.last() != Some(&b'\n') {
+            // Drop the rest of the line, a bounded piece at a time.
+            let mut rest = Vec::new();
+            loop {
+                rest.clear();
+                let m = (&mut f.reader)
+                    .take(4096)
+                    .read_until(b'\n', &mut rest)
+                    .map_err(read_err)?;
+                n += m;
+                if m == 0 || rest.last() == Some(&b'\n') {
+                    break;
+                }
+            }
+        }
         if n == 0 {
             return Ok(false);
         }
@@ -779,6 +811,7 @@ impl<'a> Interp<'a> {
         }
         self.sequence_number += 1;
         self.lines_read += 1;
+        chk!(self.line_too_long, "Command too long");
         if let Some(limit) = self.cfg.line_limit {
             chk!(
                 self.lines_read > limit,

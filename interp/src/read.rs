@@ -503,7 +503,22 @@ impl Interp<'_> {
 
     /// A real value: a number, a parameter, an expression in brackets, a
     /// function, or a sign before any of those.
+    ///
+    /// Values nest (brackets, functions, signs, `##` indirection), each
+    /// level a recursive call; the depth is bounded so that a hostile line
+    /// gets an error rather than exhausting the stack.
     pub(crate) fn read_real_value(&mut self, counter: &mut usize) -> R<f64> {
+        const MAX_NESTING: u32 = 100;
+        if self.value_depth >= MAX_NESTING {
+            return Err(self.fault_at(*counter, "Expression nested too deeply"));
+        }
+        self.value_depth += 1;
+        let v = self.read_real_value_nested(counter);
+        self.value_depth -= 1;
+        v
+    }
+
+    fn read_real_value_nested(&mut self, counter: &mut usize) -> R<f64> {
         let c = self.ch(*counter);
         if c == 0 {
             return Err(self.fault_at(*counter, "No characters found in reading real value"));

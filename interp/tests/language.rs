@@ -647,3 +647,33 @@ fn unsupported_codes_are_refused_clearly() {
     let e = error("G0 X10 Z0\nG71 Q2 D0.5\nM2\n");
     assert!(e.contains("not supported"), "{e}");
 }
+
+#[test]
+fn deeply_nested_values_are_an_error_not_a_crash() {
+    // Each level of brackets, signs or indirection is a level of
+    // recursion; it is bounded (at 100) rather than left to the stack.
+    for text in [
+        format!("G0 X{}1{}\nM2\n", "[".repeat(110), "]".repeat(110)),
+        format!("G0 X{}ABS[1]\nM2\n", "-".repeat(150)),
+        format!("G0 X{}1\nM2\n", "#".repeat(150)),
+    ] {
+        let e = error(&text);
+        assert!(e.contains("X: Expression nested too deeply"), "{e}");
+    }
+    // Ordinary nesting is untouched.
+    let fifty = format!("G0 X{}2{}\nM2\n", "[".repeat(50), "]".repeat(50));
+    assert_eq!(x_of(&fifty), 2.0);
+}
+
+#[test]
+fn lines_longer_than_linuxcnc_accepts_are_refused() {
+    // LinuxCNC reads lines into a 255-byte buffer: 252 characters and the
+    // newline fit, 253 do not.
+    let fits = format!("G0 X1 ({})\nM2\n", "a".repeat(252 - 8));
+    assert_eq!(moves(&run(&fits)).len(), 1);
+    let long = format!("G0 X0\nG0 X1 ({})\nM2\n", "a".repeat(253 - 8));
+    assert_eq!(error(&long), "t.ngc:2:1: Command too long");
+    // A huge line costs no more than the limit: it is read and dropped.
+    let huge = format!("({})\nM2\n", "a".repeat(5_000_000));
+    assert_eq!(error(&huge), "t.ngc:1:1: Command too long");
+}
