@@ -580,7 +580,11 @@ impl<'a> Interp<'a> {
             WordName::G(code) => gcode_name(code),
             WordName::M(code) => format!("M{code}"),
             WordName::Letter(l) => (l.to_ascii_uppercase() as char).to_string(),
-            WordName::O => format!("O{}", self.block.o_name),
+            // Numbered labels read `O100`; named ones keep their brackets.
+            WordName::O if self.block.o_name.bytes().all(|c| c.is_ascii_digit()) => {
+                format!("O{}", self.block.o_name)
+            }
+            WordName::O => format!("O<{}>", self.block.o_name),
         }
     }
 
