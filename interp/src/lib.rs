@@ -27,6 +27,7 @@
 
 mod block;
 pub mod canon;
+pub mod canontext;
 mod comp;
 pub mod config;
 mod cycles;

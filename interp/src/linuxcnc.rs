@@ -371,6 +371,13 @@ impl Rs274Formatter {
         }
     }
 
+    /// Print no start-up lines: for replaying a canon listing
+    /// ([`crate::canontext`]), which `rs274` runs without its interpreter's
+    /// session lines.
+    pub fn skip_start_up(&mut self) {
+        self.started = true;
+    }
+
     /// The lines `rs274` prints after the interpreter's own start-up
     /// commands: the feed reference and the reset of opening the file.
     pub fn start(&mut self, out: &mut String) {
