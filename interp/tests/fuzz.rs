@@ -9,7 +9,8 @@
 //!   programs kept in `tests/fuzz-seeds/`.
 //!
 //! Every output goes through both printers (readable and rs274 text). The
-//! tool table, file readers and INI reader get arbitrary text too.
+//! tool table, parameter file, INI and canon text readers get arbitrary
+//! text too.
 //!
 //! The number of cases per generator defaults to 256; set `PROPTEST_CASES`
 //! for a longer run, e.g.
@@ -19,6 +20,7 @@
 
 use std::path::Path;
 
+use kerf_interp::canontext::read_canon_text;
 use kerf_interp::ini::Ini;
 use kerf_interp::linuxcnc::{run_rs274, Rs274Options};
 use kerf_interp::{paramfile, Config, Interpreter, Offline, ToolTable};
@@ -374,9 +376,64 @@ proptest! {
         let _ = ToolTable::parse_lenient(&text, false);
         let _ = ToolTable::parse_lenient(&text, true);
         let _ = paramfile::parse(&text);
+        for item in read_canon_text(text.as_bytes(), FILE) {
+            if let Err(e) = item {
+                check_error_form(&e.to_string());
+            }
+        }
         let ini = Ini::parse(&text);
         let mut cfg = Config::default();
         let _ = cfg.apply_ini(&ini, Path::new("."));
+    }
+}
+
+/// Canon-text-shaped lines: call names, numbers, separators.
+fn canon_text() -> impl Strategy<Value = String> {
+    let piece = prop_oneof![
+        prop::sample::select(vec![
+            "STRAIGHT_FEED(",
+            "STRAIGHT_TRAVERSE(",
+            "ARC_FEED(",
+            "USE_LENGTH_UNITS(",
+            "CANON_UNITS_INCHES",
+            "SET_G5X_OFFSET(",
+            "SET_XY_ROTATION(",
+            "SELECT_PLANE(",
+            "CANON_PLANE_XZ",
+            "SET_MOTION_CONTROL_MODE(",
+            "CANON_CONTINUOUS",
+            "COMMENT(\"",
+            "\"",
+            "SET_FEED_RATE(",
+            "USE_TOOL_LENGTH_OFFSET(",
+            "SET_SPINDLE_SPEED(",
+            "CHANGE_TOOL(",
+            "1 N..... ",
+            "N0010 ",
+            ")",
+            ",",
+            " ",
+            "\n",
+            "\n",
+        ])
+        .prop_map(str::to_string),
+        (-1e6f64..1e6).prop_map(|v| format!("{v}")),
+        (-10i32..10).prop_map(|v| v.to_string()),
+    ];
+    prop::collection::vec(piece, 0..80).prop_map(|p| p.concat())
+}
+
+proptest! {
+    #[test]
+    fn canon_text_never_panics(text in canon_text()) {
+        let mut fmt = kerf_interp::linuxcnc::Rs274Formatter::new(1.0);
+        let mut out = String::new();
+        for item in read_canon_text(text.as_bytes(), FILE) {
+            match item {
+                Ok(c) => fmt.write(&c, &mut out),
+                Err(e) => check_error_form(&e.to_string()),
+            }
+        }
     }
 }
 
