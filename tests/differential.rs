@@ -23,7 +23,7 @@ use kerf_interp::linuxcnc::{run_rs274, Rs274Options};
 use kerf_interp::{Config, Interpreter, Offline};
 
 /// Programs known to match; the test fails below it (when rs274 runs).
-const FLOOR: usize = 196;
+const FLOOR: usize = 210;
 
 fn programs_dir() -> Option<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -85,17 +85,24 @@ fn run_kerf(dir: &Path, file: &Path, tools: &Path) -> String {
 }
 
 fn run_rs274_binary(dir: &Path, file: &Path, tools: &Path) -> String {
-    let out = Command::new("rs274")
-        .arg("-t")
-        .arg(tools)
-        .arg("-g")
-        .arg(file)
-        .current_dir(dir)
-        .stdin(Stdio::null())
-        .stderr(Stdio::null())
-        .output()
-        .expect("rs274 runs");
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    // rs274 always prints its start-up lines; on a loaded machine it has
+    // now and then printed nothing at all, so an empty run is retried.
+    for _ in 0..3 {
+        let out = Command::new("rs274")
+            .arg("-t")
+            .arg(tools)
+            .arg("-g")
+            .arg(file)
+            .current_dir(dir)
+            .stdin(Stdio::null())
+            .stderr(Stdio::null())
+            .output()
+            .expect("rs274 runs");
+        if !out.stdout.is_empty() {
+            return String::from_utf8_lossy(&out.stdout).into_owned();
+        }
+    }
+    String::new()
 }
 
 #[test]
@@ -149,8 +156,11 @@ fn matches_rs274_on_linuxcnc_programs() {
         matched + differ.len(),
         differ.len()
     );
-    assert!(
-        matched >= FLOOR,
-        "differential regressed: {matched} match, floor {FLOOR}"
-    );
+    // The floor applies to the whole set, not to a KERF_PROGRAM selection.
+    if only.is_none() {
+        assert!(
+            matched >= FLOOR,
+            "differential regressed: {matched} match, floor {FLOOR}"
+        );
+    }
 }

@@ -13,14 +13,23 @@ use std::sync::Arc;
 /// One machine axis, in the RS274NGC order X Y Z A B C U V W.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Axis {
+    /// Primary linear axis X.
     X,
+    /// Primary linear axis Y.
     Y,
+    /// Primary linear axis Z.
     Z,
+    /// Rotary axis about X.
     A,
+    /// Rotary axis about Y.
     B,
+    /// Rotary axis about Z.
     C,
+    /// Secondary linear axis parallel to X.
     U,
+    /// Secondary linear axis parallel to Y.
     V,
+    /// Secondary linear axis parallel to Z.
     W,
 }
 
@@ -69,14 +78,23 @@ impl fmt::Display for Axis {
 /// A tool position in machine coordinates: mm for X Y Z U V W, degrees for A B C.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Position {
+    /// X, mm.
     pub x: f64,
+    /// Y, mm.
     pub y: f64,
+    /// Z, mm.
     pub z: f64,
+    /// A, degrees.
     pub a: f64,
+    /// B, degrees.
     pub b: f64,
+    /// C, degrees.
     pub c: f64,
+    /// U, mm.
     pub u: f64,
+    /// V, mm.
     pub v: f64,
+    /// W, mm.
     pub w: f64,
 }
 
@@ -142,7 +160,9 @@ impl Position {
 /// Length units a program is written in (G20 inches, G21 millimetres).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Units {
+    /// Millimetres (G21).
     Mm,
+    /// Inches (G20).
     Inch,
 }
 
@@ -212,7 +232,10 @@ pub enum MotionMode {
     ExactPath,
     /// G64: blend corners, deviating from the path by at most `tolerance`
     /// mm (0 means as fast as possible).
-    Continuous { tolerance: f64 },
+    Continuous {
+        /// Largest deviation from the programmed path, mm.
+        tolerance: f64,
+    },
 }
 
 /// What a straight probe (G38.2 to G38.5) does.
@@ -292,8 +315,12 @@ impl fmt::Display for BlockNumber {
 /// commands the interpreter gives at start-up, before it reads any line.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Source {
+    /// The file name as the program was opened (or the name given to
+    /// in-memory text).
     pub file: Arc<str>,
+    /// 1-based line number in that file; 0 for start-up commands.
     pub line: u32,
+    /// The line's N word, if it has one.
     pub block: Option<BlockNumber>,
 }
 
@@ -317,7 +344,9 @@ impl fmt::Display for Source {
 /// One canonical machining command with the source line that produced it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Canon {
+    /// The line that produced the command.
     pub source: Source,
+    /// The command itself.
     pub cmd: CanonCmd,
 }
 
@@ -336,13 +365,27 @@ pub enum CanonCmd {
     UseLengthUnits(Units),
     /// The active work offset changed: coordinate system `index` (1 = G54 …
     /// 9 = G59.3) with its offset from machine zero in mm/degrees.
-    SetG5xOffset { index: u8, offset: Position },
+    SetG5xOffset {
+        /// 1 = G54 … 9 = G59.3.
+        index: u8,
+        /// The system's origin in machine coordinates, mm/degrees.
+        offset: Position,
+    },
     /// The G92/G52 offset changed (mm/degrees; zero when not applied).
-    SetG92Offset { offset: Position },
+    SetG92Offset {
+        /// The offset added to program coordinates, mm/degrees.
+        offset: Position,
+    },
     /// The rotation of the work XY plane about the work origin, degrees CCW.
-    SetXYRotation { degrees: f64 },
+    SetXYRotation {
+        /// Rotation angle, degrees counter-clockwise.
+        degrees: f64,
+    },
     /// The tool length offset in force (G43/G43.1/G43.2/G49), mm/degrees.
-    UseToolLengthOffset { offset: Position },
+    UseToolLengthOffset {
+        /// The offset added to every axis, mm/degrees.
+        offset: Position,
+    },
     /// The plane for arcs and cycles changed (G17 to G19.1).
     SelectPlane(Plane),
 
@@ -350,23 +393,45 @@ pub enum CanonCmd {
     /// Feed rate for following feed moves: mm/min (or deg/min for pure rotary
     /// moves); mm per spindle revolution after
     /// [`CanonCmd::SetFeedMode`] with `per_revolution`.
-    SetFeedRate { mm_per_min: f64 },
+    SetFeedRate {
+        /// mm/min, deg/min, or mm/rev in per-revolution mode.
+        mm_per_min: f64,
+    },
     /// Feed per minute (`per_revolution` false) or per revolution of `spindle`.
-    SetFeedMode { spindle: u32, per_revolution: bool },
+    SetFeedMode {
+        /// The spindle that per-revolution feed follows (0-based).
+        spindle: u32,
+        /// True for G95 (units per revolution), false for G93/G94.
+        per_revolution: bool,
+    },
     /// Path-following mode (G61, G61.1, G64 P).
     SetMotionControlMode(MotionMode),
     /// Tolerance in mm for merging collinear small moves (G64 Q).
-    SetNaivecamTolerance { tolerance: f64 },
+    SetNaivecamTolerance {
+        /// mm (0 disables merging).
+        tolerance: f64,
+    },
     /// Trajectory planner choice (G64 … R, as in LinuxCNC 2.10): planner 0
     /// is the default; planner 1 scales the peak acceleration it may use in
     /// blends by `peak_scale` (0.1 to 1).
-    SetPlannerMode { planner: u8, peak_scale: f64 },
+    SetPlannerMode {
+        /// Planner number (0 or 1).
+        planner: u8,
+        /// Factor on the peak blend acceleration (0.1 to 1).
+        peak_scale: f64,
+    },
 
     // ---- motion ----
     /// Rapid move (G0) in a straight line to `end`.
-    StraightTraverse { end: Position },
+    StraightTraverse {
+        /// Target, machine coordinates.
+        end: Position,
+    },
     /// Feed move (G1) in a straight line to `end` at the current feed rate.
-    StraightFeed { end: Position },
+    StraightFeed {
+        /// Target, machine coordinates.
+        end: Position,
+    },
     /// Feed move along a circular arc or helix (G2/G3) from the current
     /// position to `end`.
     ///
@@ -377,61 +442,130 @@ pub enum CanonCmd {
     /// clockwise (G2) seen from the positive normal axis; its magnitude is 1
     /// plus the number of extra full turns (P word).
     ArcFeed {
+        /// End of the move (arc end and helix end), machine coordinates.
         end: Position,
+        /// Centre on the plane's first and second axes, machine mm.
         center: [f64; 2],
+        /// The plane of the arc.
         plane: Plane,
+        /// Signed turn count: sign is the direction (+ CCW), magnitude 1
+        /// plus the extra full turns.
         turns: i32,
     },
     /// Probe move (G38.x) in a straight line towards `end`.
-    StraightProbe { end: Position, kind: ProbeKind },
+    StraightProbe {
+        /// Where the probe move stops if nothing trips, machine coordinates.
+        end: Position,
+        /// Which of G38.2 to G38.5.
+        kind: ProbeKind,
+    },
     /// Rigid tapping (G33.1, G84 on a spindle with an encoder): feed to `end`
     /// synchronised with the spindle, reverse it, and return.
-    RigidTap { end: Position, scale: f64 },
+    RigidTap {
+        /// Bottom of the hole, machine coordinates.
+        end: Position,
+        /// Spindle speed factor for the retract (1 = same speed).
+        scale: f64,
+    },
     /// Start spindle-synchronised motion: following feed moves advance
     /// `mm_per_rev` per revolution of `spindle` (G33, G76).
     StartSpeedFeedSync {
+        /// The spindle to follow (0-based).
         spindle: u32,
+        /// Travel per spindle revolution, mm.
         mm_per_rev: f64,
+        /// True to follow spindle velocity rather than position (G95
+        /// feed), false for position-locked threading.
         velocity_mode: bool,
     },
     /// End spindle-synchronised motion.
     StopSpeedFeedSync,
     /// Dwell (G4) for a time in seconds.
-    Dwell { seconds: f64 },
+    Dwell {
+        /// Pause length, seconds.
+        seconds: f64,
+    },
 
     // ---- spindle ----
     /// Spindle speed, revolutions per minute (or surface speed in CSS mode).
-    SetSpindleSpeed { spindle: u32, rpm: f64 },
+    SetSpindleSpeed {
+        /// Spindle number (0-based).
+        spindle: u32,
+        /// Revolutions per minute, or surface speed (m/min or ft/min in
+        /// program units) in CSS mode.
+        rpm: f64,
+    },
     /// Start the spindle clockwise (M3).
-    StartSpindleClockwise { spindle: u32 },
+    StartSpindleClockwise {
+        /// Spindle number (0-based).
+        spindle: u32,
+    },
     /// Start the spindle counter-clockwise (M4).
-    StartSpindleCounterclockwise { spindle: u32 },
+    StartSpindleCounterclockwise {
+        /// Spindle number (0-based).
+        spindle: u32,
+    },
     /// Stop the spindle (M5).
-    StopSpindleTurning { spindle: u32 },
+    StopSpindleTurning {
+        /// Spindle number (0-based).
+        spindle: u32,
+    },
     /// Constant-RPM (`css_max_rpm` 0, G97) or constant-surface-speed mode
     /// (G96) with the given maximum speed.
-    SetSpindleMode { spindle: u32, css_max_rpm: f64 },
+    SetSpindleMode {
+        /// Spindle number (0-based).
+        spindle: u32,
+        /// Maximum RPM in CSS mode; 0 for constant RPM.
+        css_max_rpm: f64,
+    },
     /// Orient the spindle to an angle in degrees (M19).
     OrientSpindle {
+        /// Spindle number (0-based).
         spindle: u32,
+        /// Target angle, degrees.
         degrees: f64,
+        /// Which way to turn to reach it.
         direction: OrientDirection,
     },
     /// Wait up to `timeout` seconds for the spindle orientation to finish.
-    WaitSpindleOrientComplete { spindle: u32, timeout: f64 },
+    WaitSpindleOrientComplete {
+        /// Spindle number (0-based).
+        spindle: u32,
+        /// Longest wait, seconds.
+        timeout: f64,
+    },
 
     // ---- tools ----
     /// Prepare tool `tool` in `pocket` for the next change (T word).
-    SelectTool { tool: i32, pocket: i32 },
+    SelectTool {
+        /// Tool number.
+        tool: i32,
+        /// Tool table index (pocket) holding it.
+        pocket: i32,
+    },
     /// A tool change is about to start (M6).
     StartChange,
     /// Change to the prepared tool (M6).
-    ChangeTool { tool: i32, pocket: i32 },
+    ChangeTool {
+        /// Tool number going into the spindle.
+        tool: i32,
+        /// Its tool table index (pocket).
+        pocket: i32,
+    },
     /// Declare `tool` to be in the spindle without changing (M61).
-    ChangeToolNumber { tool: i32 },
+    ChangeToolNumber {
+        /// Tool table index of the tool now taken as loaded (LinuxCNC
+        /// passes the pocket, not the tool number).
+        tool: i32,
+    },
     /// Write one tool table entry (G10 L1, L10, L11); `index` is the
     /// entry's place in the table.
-    SetToolTableEntry { index: i32, data: ToolData },
+    SetToolTableEntry {
+        /// Tool table index of the entry.
+        index: i32,
+        /// The new entry (offsets in mm/degrees).
+        data: ToolData,
+    },
 
     // ---- coolant and overrides ----
     /// Mist coolant on (M7).
@@ -447,9 +581,15 @@ pub enum CanonCmd {
     /// Ignore the feed override (M49, M50 P0).
     DisableFeedOverride,
     /// Allow the spindle speed override (M48, M51 P1).
-    EnableSpeedOverride { spindle: u32 },
+    EnableSpeedOverride {
+        /// Spindle number (0-based).
+        spindle: u32,
+    },
     /// Ignore the spindle speed override (M49, M51 P0).
-    DisableSpeedOverride { spindle: u32 },
+    DisableSpeedOverride {
+        /// Spindle number (0-based).
+        spindle: u32,
+    },
     /// Allow adaptive feed (M52 P1).
     EnableAdaptiveFeed,
     /// Ignore adaptive feed (M52 P0).
@@ -461,28 +601,61 @@ pub enum CanonCmd {
 
     // ---- inputs and outputs ----
     /// Set digital output `index` synchronised with the next move (M62).
-    SetMotionOutputBit { index: u32 },
+    SetMotionOutputBit {
+        /// Output number.
+        index: u32,
+    },
     /// Clear digital output `index` synchronised with the next move (M63).
-    ClearMotionOutputBit { index: u32 },
+    ClearMotionOutputBit {
+        /// Output number.
+        index: u32,
+    },
     /// Set analog output `index` synchronised with the next move (M67).
-    SetMotionOutputValue { index: u32, value: f64 },
+    SetMotionOutputValue {
+        /// Output number.
+        index: u32,
+        /// Value to set.
+        value: f64,
+    },
     /// Set digital output `index` now (M64).
-    SetAuxOutputBit { index: u32 },
+    SetAuxOutputBit {
+        /// Output number.
+        index: u32,
+    },
     /// Clear digital output `index` now (M65).
-    ClearAuxOutputBit { index: u32 },
+    ClearAuxOutputBit {
+        /// Output number.
+        index: u32,
+    },
     /// Set analog output `index` now (M68).
-    SetAuxOutputValue { index: u32, value: f64 },
+    SetAuxOutputValue {
+        /// Output number.
+        index: u32,
+        /// Value to set.
+        value: f64,
+    },
     /// Wait on an input (M66): digital or analog `index`, `mode` 0 = now,
     /// 1 = rise, 2 = fall, 3 = high, 4 = low; at most `timeout` seconds.
     /// The result goes to parameter #5399 from the environment.
     WaitInput {
+        /// Input number.
         index: u32,
+        /// Digital (P word) or analog (E word) input.
         digital: bool,
+        /// Wait mode 0 to 4 (L word).
         mode: u8,
+        /// Longest wait, seconds (Q word).
         timeout: f64,
     },
     /// Run user M-code program `M{number}` with its P and Q values (M100–M199).
-    UserMCode { number: u32, p: f64, q: f64 },
+    UserMCode {
+        /// 100 to 199.
+        number: u32,
+        /// The P word (0 if absent).
+        p: f64,
+        /// The Q word (0 if absent).
+        q: f64,
+    },
 
     // ---- messages ----
     /// A plain comment `( ... )` or `; ...`.

@@ -175,31 +175,32 @@ impl Interp<'_> {
     }
 
     /// Lathe tools are compensated about the tip radius centre, which is
-    /// off the tool's control point for orientations 1–8.
-    fn lathe_origin_x(&self, x: f64) -> f64 {
-        let o = self.cutter_comp_orientation;
-        let r = self.cutter_comp_radius;
+    /// off the tool's control point for orientations 1–8: the shift from
+    /// that centre to the control point on X and on Z (zero off G18).
+    fn lathe_tip_shift(&self) -> (f64, f64) {
         if self.plane != Plane::XZ {
-            return x;
+            return (0.0, 0.0);
         }
-        match o {
-            2 | 6 | 1 => x - r,
-            3 | 8 | 4 => x + r,
-            _ => x,
-        }
+        let r = self.cutter_comp_radius;
+        let dx = match self.cutter_comp_orientation {
+            1 | 2 | 6 => -r,
+            3 | 4 | 8 => r,
+            _ => 0.0,
+        };
+        let dz = match self.cutter_comp_orientation {
+            2 | 3 | 7 => -r,
+            1 | 4 | 5 => r,
+            _ => 0.0,
+        };
+        (dx, dz)
+    }
+
+    fn lathe_origin_x(&self, x: f64) -> f64 {
+        x + self.lathe_tip_shift().0
     }
 
     fn lathe_origin_z(&self, z: f64) -> f64 {
-        let o = self.cutter_comp_orientation;
-        let r = self.cutter_comp_radius;
-        if self.plane != Plane::XZ {
-            return z;
-        }
-        match o {
-            2 | 7 | 3 => z - r,
-            1 | 5 | 4 => z + r,
-            _ => z,
-        }
+        z + self.lathe_tip_shift().1
     }
 
     /// Give every held command, in order.

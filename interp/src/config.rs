@@ -77,7 +77,7 @@ impl Remap {
             .next()
             .map(|c| c.to_ascii_lowercase())
             .ok_or("empty code")?;
-        let rest = &name[1..];
+        let rest = &name[letter.len_utf8()..];
         let number = match letter {
             't' | 's' | 'f' => {
                 if !rest.is_empty() {
@@ -162,9 +162,10 @@ pub struct Config {
     pub no_downcase_oword: bool,
     /// Added to the M19 R angle, degrees.
     pub orient_offset: f64,
-    /// Largest distance the centre of an arc given with I J K may be off,
-    /// inch and mm.
+    /// Largest difference between the start and end radius of an arc
+    /// given with I J K, inches (for G20 programs).
     pub center_arc_radius_tolerance_inch: f64,
+    /// The same in mm (for G21 programs).
     pub center_arc_radius_tolerance_mm: f64,
     /// Rotary axes A B C that wrap at 360°.
     pub wrapped_rotary: [bool; 3],
@@ -185,6 +186,10 @@ pub struct Config {
     /// After an error, report it and go on with the next line (as
     /// `rs274 -n 0` does) instead of stopping.
     pub continue_after_error: bool,
+    /// Stop with an error after reading this many lines in all (counting
+    /// every pass of a loop): a guard against runaway loops for callers
+    /// that cannot wait forever, such as the fuzz tests. `None`: no limit.
+    pub line_limit: Option<u64>,
 }
 
 impl Default for Config {
@@ -218,6 +223,7 @@ impl Default for Config {
             start_position: Position::ZERO,
             spindle_tool_index: 0,
             continue_after_error: false,
+            line_limit: None,
         }
     }
 }
@@ -396,9 +402,12 @@ pub trait Environment {
 }
 
 /// The environment of offline interpretation, modelled on LinuxCNC's
-/// stand-alone interpreter: a probe trips at its programmed end and the
-/// machine backs off 0.254 mm towards the start; inputs read their
-/// defaults; parameters are kept only if a parameter file is given.
+/// stand-alone interpreter: a probe move reaches its programmed end, which
+/// becomes the recorded probe position, and the machine backs off 0.254 mm
+/// towards the start; #5070 reads 0 (not tripped), as rs274 reports, so
+/// programs that loop until a probe trips behave as they do under rs274;
+/// inputs read their defaults; parameters are kept only if a parameter file
+/// is given.
 #[derive(Clone, Debug, Default)]
 pub struct Offline {
     /// Where to save the parameters at program end, if anywhere.
@@ -417,7 +426,7 @@ impl Environment for Offline {
             }
         }
         ProbeOutcome {
-            tripped: true,
+            tripped: false,
             trip_position: end,
             final_position: Position::from_array(stop),
         }
@@ -456,7 +465,7 @@ mod tests {
                 error_if_no_trip: true,
             },
         );
-        assert!(out.tripped);
+        assert!(!out.tripped);
         assert_eq!(out.trip_position, Position::ZERO);
         assert!((out.final_position.z - 0.254).abs() < 1e-12);
     }

@@ -133,6 +133,16 @@ impl Interp<'_> {
         });
     }
 
+    /// Stop the spindle and orient it to 0° (G87 back boring).
+    fn stop_and_orient(&mut self, direction: OrientDirection) {
+        self.emit(CanonCmd::StopSpindleTurning { spindle: 0 });
+        self.emit(CanonCmd::OrientSpindle {
+            spindle: 0,
+            degrees: 0.0,
+            direction,
+        });
+    }
+
     /// A canned cycle (G73, G74, G81–G89).
     pub(crate) fn convert_cycle(&mut self, motion: i32, b: &mut Block) -> R {
         chk!(self.feed_rate == 0.0, "Cannot feed with zero feed rate");
@@ -430,23 +440,13 @@ impl Interp<'_> {
                     };
                     let (oa, ob) = (aa + ci, bb + cj);
                     self.cycle_traverse(cp, oa, ob, r);
-                    self.emit(CanonCmd::StopSpindleTurning { spindle: 0 });
-                    self.emit(CanonCmd::OrientSpindle {
-                        spindle: 0,
-                        degrees: 0.0,
-                        direction: orient,
-                    });
+                    self.stop_and_orient(orient);
                     self.cycle_traverse(cp, oa, ob, cc);
                     self.cycle_traverse(cp, aa, bb, cc);
                     self.spindle_restart(direction);
                     self.cycle_feed(cp, aa, bb, ck);
                     self.cycle_feed(cp, aa, bb, cc);
-                    self.emit(CanonCmd::StopSpindleTurning { spindle: 0 });
-                    self.emit(CanonCmd::OrientSpindle {
-                        spindle: 0,
-                        degrees: 0.0,
-                        direction: orient,
-                    });
+                    self.stop_and_orient(orient);
                     self.cycle_traverse(cp, oa, ob, cc);
                     self.cycle_traverse(cp, oa, ob, clear_cc);
                     self.cycle_traverse(cp, aa, bb, clear_cc);

@@ -45,6 +45,20 @@ pub(crate) fn rotate(x: f64, y: f64, degrees: f64) -> (f64, f64) {
     (x * c - y * s, x * s + y * c)
 }
 
+/// `a + b`, except that a zero offset leaves `a` (and its sign) alone.
+fn add_offset(a: f64, b: f64) -> f64 {
+    if b == 0.0 {
+        a
+    } else {
+        a + b
+    }
+}
+
+/// `v` rounded to `digits` significant decimal digits.
+fn round_significant(v: f64, digits: usize) -> f64 {
+    format!("{:.*e}", digits - 1, v).parse().unwrap_or(v)
+}
+
 impl CanonState {
     fn scale(&self, axis: usize) -> f64 {
         if (A..=C).contains(&axis) {
@@ -55,18 +69,61 @@ impl CanonState {
     }
 
     /// Program coordinates (current units, work system) to machine mm.
+    ///
+    /// A zero offset is skipped rather than added so that a programmed
+    /// `-0` stays negative zero (IEEE `-0 + 0` is `+0`): rs274 prints the
+    /// sign of zero, and the text formatter can recover it only if it
+    /// survives the trip to machine coordinates and back.
     pub fn to_machine(self, p: [f64; 9]) -> Position {
         let mut m = [0.0; 9];
         for i in 0..9 {
-            m[i] = p[i] * self.scale(i) + self.g92[i];
+            m[i] = add_offset(p[i] * self.scale(i), self.g92[i]);
         }
         let (x, y) = rotate(m[0], m[1], self.rotation);
         m[0] = x;
         m[1] = y;
         for i in 0..9 {
-            m[i] += self.g5x[i] + self.tool[i];
+            m[i] = add_offset(add_offset(m[i], self.g5x[i]), self.tool[i]);
         }
         Position::from_array(m)
+    }
+
+    /// [`Self::to_machine`] for one axis that rotation does not touch.
+    fn axis_to_machine(&self, axis: usize, v: f64) -> f64 {
+        let m = add_offset(v * self.scale(axis), self.g92[axis]);
+        add_offset(add_offset(m, self.g5x[axis]), self.tool[axis])
+    }
+
+    /// Machine mm back to the program coordinates the interpreter held.
+    ///
+    /// Scaling by 25.4 and adding offsets is not invertible in floating
+    /// point: `(x * 25.4 + o - o) / 25.4` can differ from `x` in its last
+    /// bits, and when `x` was typed as, say, `1.26515`, those bits decide
+    /// whether it prints as 1.2651 or 1.2652. So where the plain inverse
+    /// lands within a hair of such a tie, the value is replaced by the
+    /// shortest decimal that converts forward to the same machine value:
+    /// that is the number the program wrote. X and Y under a rotation are
+    /// left as computed.
+    pub fn to_program_recovered(self, pos: Position) -> [f64; 9] {
+        let mut p = self.to_program(pos);
+        let m = pos.to_array();
+        for i in 0..9 {
+            if i < 2 && self.rotation != 0.0 {
+                continue;
+            }
+            let scaled = (p[i] * 1e4).abs().fract();
+            if (scaled - 0.5).abs() > 1e-6 {
+                continue;
+            }
+            if let Some(c) = (1..=17)
+                .map(|digits| round_significant(p[i], digits))
+                .find(|&c| self.axis_to_machine(i, c) == m[i])
+            {
+                // Keep the sign of a zero the program wrote as `-0`.
+                p[i] = if c == 0.0 { p[i] } else { c };
+            }
+        }
+        p
     }
 
     /// Machine mm back to program coordinates.
@@ -215,5 +272,53 @@ impl Interp<'_> {
             turns: rotation,
         });
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values typed in an inch program with offsets in force come back from
+    /// machine millimetres as the same decimals, ties at the fourth place
+    /// and the sign of zero included.
+    #[test]
+    fn program_coordinates_survive_the_trip_to_machine_and_back() {
+        let state = CanonState {
+            units: Units::Inch,
+            g5x: [1.5, -2.25, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            g92: [0.0, 0.125, 0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ..CanonState::default()
+        };
+        let typed = [
+            -1.26515, 0.00005, 2.34565, -0.45355, 1.0, 0.3, 7.77775, -0.00015,
+        ];
+        for &v in &typed {
+            for axis in 0..3 {
+                let mut p = [0.0; 9];
+                p[axis] = v;
+                let back = state.to_program_recovered(state.to_machine(p));
+                assert_eq!(
+                    format!("{:.4}", back[axis]),
+                    format!("{v:.4}"),
+                    "axis {axis}, typed {v}"
+                );
+            }
+        }
+        // Negative zero survives where no offset is added (with one, -0 + o
+        // and +0 + o are the same machine value).
+        let plain = CanonState {
+            units: Units::Inch,
+            ..CanonState::default()
+        };
+        let mut p = [0.0; 9];
+        p[0] = -0.0;
+        let back = plain.to_program_recovered(plain.to_machine(p));
+        assert_eq!(format!("{:.4}", back[0]), "-0.0000");
+        // Machine coordinates: 1 inch on X is 25.4 mm plus the G5x offset;
+        // Y at 0 sits at the sum of the offsets (all held in mm).
+        let m = state.to_machine([1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert!((m.x - 26.9).abs() < 1e-12);
+        assert!((m.y - (-2.125)).abs() < 1e-12);
     }
 }

@@ -65,6 +65,20 @@ impl Fault {
     }
 }
 
+impl Fault {
+    /// Place a fault that arose while reading the value of a word: name
+    /// that word, and its column unless the fault has a closer one.
+    pub fn in_word(mut self, word: impl FnOnce() -> String, column: u32) -> Fault {
+        if self.word.is_none() {
+            self.word = Some(word());
+        }
+        if self.column.is_none() {
+            self.column = Some(column);
+        }
+        self
+    }
+}
+
 /// Result of interpreter internals.
 pub(crate) type R<T = ()> = Result<T, Fault>;
 

@@ -59,7 +59,9 @@ impl Interp<'_> {
 
     /// Run a parsed block. Returns `Exit` at program end.
     pub(crate) fn execute_block(&mut self, b: &mut Block) -> R<ExecStatus> {
-        if b.comment.is_some() && b.once(step::COMMENT) {
+        // An empty `()` is no comment at all (LinuxCNC tests the first
+        // character of the stored text).
+        if b.comment.as_deref().is_some_and(|c| !c.is_empty()) && b.once(step::COMMENT) {
             let text = b.comment.clone().unwrap_or_default();
             self.convert_comment(&text, true)?;
         }

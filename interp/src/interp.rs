@@ -192,6 +192,12 @@ pub(crate) struct Interp<'a> {
     pub cur_file: usize,
     /// Line number of the line last read in the current file.
     pub sequence_number: u32,
+    /// Lines read in all, for [`Config::line_limit`].
+    pub lines_read: u64,
+    /// The line just read was longer than LinuxCNC accepts.
+    pub line_too_long: bool,
+    /// How deeply the value being read is nested (see `read_real_value`).
+    pub value_depth: u32,
     /// The line as read, trailing blanks removed.
     pub raw: Vec<u8>,
     /// The line folded: lower case, blanks removed outside comments.
@@ -313,9 +319,10 @@ pub(crate) struct Interp<'a> {
     pub line_text_override: Option<String>,
 }
 
-/// Version reported by `#<_vmajor>` and `#<_vminor>` (the LinuxCNC release
-/// whose language this interpreter follows).
-const VERSION: (f64, f64) = (2.0, 9.0);
+/// Version reported by `#<_vmajor>` and `#<_vminor>`. LinuxCNC reads its
+/// package version "2.9.0" with `sscanf("%lf%lf")`, which yields 2.9 and
+/// 0.0; programs test `_vmajor` against 2.9, so kerf reports the same pair.
+const VERSION: (f64, f64) = (2.9, 0.0);
 
 impl<'a> Interp<'a> {
     pub fn new(
@@ -336,6 +343,9 @@ impl<'a> Interp<'a> {
             }],
             cur_file: 0,
             sequence_number: 0,
+            lines_read: 0,
+            line_too_long: false,
+            value_depth: 0,
             raw: Vec::with_capacity(256),
             line: Vec::with_capacity(256),
             cols: Vec::with_capacity(256),
@@ -359,7 +369,7 @@ impl<'a> Interp<'a> {
             feed_rate: 0.0,
             plane: Plane::XY,
             motion_mode: g::G80,
-            retract_mode: Retract::OldZ,
+            retract_mode: Retract::RPlane,
             control_mode: MotionMode::Continuous { tolerance: 0.0 },
             tolerance: 0.0,
             naivecam_tolerance: 0.0,
@@ -570,7 +580,11 @@ impl<'a> Interp<'a> {
             WordName::G(code) => gcode_name(code),
             WordName::M(code) => format!("M{code}"),
             WordName::Letter(l) => (l.to_ascii_uppercase() as char).to_string(),
-            WordName::O => format!("O{}", self.block.o_name),
+            // Numbered labels read `O100`; named ones keep their brackets.
+            WordName::O if self.block.o_name.bytes().all(|c| c.is_ascii_digit()) => {
+                format!("O{}", self.block.o_name)
+            }
+            WordName::O => format!("O<{}>", self.block.o_name),
         }
     }
 
@@ -586,7 +600,8 @@ impl<'a> Interp<'a> {
         };
         InterpError {
             file: self.files[self.cur_file].name.clone(),
-            line: self.sequence_number,
+            // An empty file has no line 0 to point at; its end is line 1.
+            line: self.sequence_number.max(1),
             column,
             word,
             message: f.message,
@@ -602,13 +617,39 @@ impl<'a> Interp<'a> {
 
     /// Read the next raw line of the current file into `self.raw`.
     /// Returns false at end of file.
+    ///
+    /// LinuxCNC reads a line into a 255-byte buffer and refuses one of 254
+    /// bytes or more (newline included) as "Command too long". kerf keeps
+    /// that limit: programs LinuxCNC runs fit it, and it bounds the memory
+    /// a line can take. The rest of a long line is read and dropped, and
+    /// `line_too_long` tells [`Interp::read`] to refuse it.
     fn read_raw_line(&mut self) -> R<bool> {
+        use std::io::Read;
+        const MAX_LINE: u64 = 254;
         self.raw.clear();
         let f = &mut self.files[self.cur_file];
-        let n = f
-            .reader
+        let name = &f.name;
+        let read_err = |e: std::io::Error| Fault::new(format!("cannot read {name}: {e}"));
+        let mut n = (&mut f.reader)
+            .take(MAX_LINE)
             .read_until(b'\n', &mut self.raw)
-            .map_err(|e| Fault::new(format!("cannot read {}: {e}", f.name)))?;
+            .map_err(read_err)?;
+        self.line_too_long = n as u64 >= MAX_LINE;
+        if self.line_too_long && self.raw.last() != Some(&b'\n') {
+            // Drop the rest of the line, a bounded piece at a time.
+            let mut rest = Vec::new();
+            loop {
+                rest.clear();
+                let m = (&mut f.reader)
+                    .take(4096)
+                    .read_until(b'\n', &mut rest)
+                    .map_err(read_err)?;
+                n += m;
+                if m == 0 || rest.last() == Some(&b'\n') {
+                    break;
+                }
+            }
+        }
         if n == 0 {
             return Ok(false);
         }
@@ -773,6 +814,14 @@ impl<'a> Interp<'a> {
             bail!("File ended with no percent sign or program end");
         }
         self.sequence_number += 1;
+        self.lines_read += 1;
+        chk!(self.line_too_long, "Command too long");
+        if let Some(limit) = self.cfg.line_limit {
+            chk!(
+                self.lines_read > limit,
+                "Program stopped: it read more than the line limit of {limit} lines"
+            );
+        }
         self.line_n = block_number_of(&self.raw);
         self.close_and_downcase()?;
         if self.line == b"%" && self.percent_flag {
@@ -937,7 +986,7 @@ fn block_number_of(raw: &[u8]) -> Option<BlockNumber> {
     }
 }
 
-use crate::error::bail;
+use crate::error::{bail, chk};
 
 // ----------------------------------------------------------------------
 // The public interpreter.
@@ -998,16 +1047,7 @@ impl Interpreter<'static> {
 
     /// Interpret program text held in memory, naming it `file`.
     pub fn from_text(text: impl Into<String>, file: impl Into<Arc<str>>, start: Position) -> Self {
-        Interpreter::with_source(
-            Box::new(Cursor::new(text.into().into_bytes())),
-            file,
-            None,
-            Config {
-                start_position: start,
-                ..Config::default()
-            },
-            Box::new(Offline::default()),
-        )
+        Interpreter::new(Cursor::new(text.into().into_bytes()), file, start)
     }
 }
 

@@ -11,13 +11,23 @@
 //! every error names file, line, column and the word at fault. The
 //! [`linuxcnc`] module prints the stream in the text format of LinuxCNC's
 //! stand-alone interpreter `rs274`.
+//!
+//! Inside, a line is read as LinuxCNC reads it: folded (lower case, blanks
+//! dropped outside comments), then walked word by word, with its tokens
+//! (numbers, operators, function names, O-word keywords, `<names>`)
+//! recognised by nom parsers and its values evaluated as they are read.
+//! Blocks then execute in LinuxCNC's order, and a small canon layer turns
+//! program coordinates into machine coordinates. The language is described
+//! in `docs/gcode.md`.
 
 // Positions are parallel arrays indexed by axis (X..W); index loops over
 // them read more plainly than zipped iterators.
 #![allow(clippy::needless_range_loop)]
+#![warn(missing_docs)]
 
 mod block;
 pub mod canon;
+pub mod canontext;
 mod comp;
 pub mod config;
 mod cycles;
@@ -27,6 +37,8 @@ mod exec;
 mod g7x;
 pub mod ini;
 mod interp;
+mod ld;
+mod lex;
 pub mod linuxcnc;
 mod motion;
 mod oword;

@@ -147,13 +147,13 @@ impl Rs274Formatter {
                 );
             }
             StraightTraverse { end } => {
-                let p = self.state.to_program(*end);
+                let p = self.state.to_program_recovered(*end);
                 s.push_str("STRAIGHT_TRAVERSE(");
                 Self::xyzabc(&mut s, &p);
                 s.push(')');
             }
             StraightFeed { end } => {
-                let p = self.state.to_program(*end);
+                let p = self.state.to_program_recovered(*end);
                 s.push_str("STRAIGHT_FEED(");
                 Self::xyzabc(&mut s, &p);
                 s.push(')');
@@ -165,11 +165,11 @@ impl Rs274Formatter {
                 turns,
             } => {
                 let [fa, sa, na] = plane.axes();
-                let p = self.state.to_program(*end);
+                let p = self.state.to_program_recovered(*end);
                 let mut c = *end;
                 c.set(fa, center[0]);
                 c.set(sa, center[1]);
-                let pc = self.state.to_program(c);
+                let pc = self.state.to_program_recovered(c);
                 let _ = write!(
                     s,
                     "ARC_FEED({:.4}, {:.4}, {:.4}, {:.4}, {turns}, {:.4}, {:.4}, {:.4}, {:.4})",
@@ -185,7 +185,7 @@ impl Rs274Formatter {
             }
             StraightProbe { end, .. } => {
                 lines.push((false, "TURN_PROBE_ON()".into()));
-                let p = self.state.to_program(*end);
+                let p = self.state.to_program_recovered(*end);
                 s.push_str("STRAIGHT_PROBE(");
                 Self::xyzabc(&mut s, &p);
                 s.push(')');
@@ -194,7 +194,7 @@ impl Rs274Formatter {
                 return;
             }
             RigidTap { end, .. } => {
-                let p = self.state.to_program(*end);
+                let p = self.state.to_program_recovered(*end);
                 let _ = write!(s, "RIGID_TAP({:.4}, {:.4}, {:.4})", p[0], p[1], p[2]);
             }
             StartSpeedFeedSync {
@@ -369,6 +369,13 @@ impl Rs274Formatter {
             out.push_str(&text);
             out.push('\n');
         }
+    }
+
+    /// Print no start-up lines: for replaying a canon listing
+    /// ([`crate::canontext`]), which `rs274` runs without its interpreter's
+    /// session lines.
+    pub fn skip_start_up(&mut self) {
+        self.started = true;
     }
 
     /// The lines `rs274` prints after the interpreter's own start-up

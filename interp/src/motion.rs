@@ -2,8 +2,6 @@
 //! arcs (centre or radius format, full circles, helices, P turns), probes,
 //! spindle-synchronised moves, and the inverse-time feed rates they need.
 
-use std::f64::consts::FRAC_PI_2;
-
 use crate::block::{g, gm, is_cycle, round_to_int, Block};
 use crate::canon::{CanonCmd, Plane, ProbeKind, Units};
 use crate::emit::rotate;
@@ -112,6 +110,10 @@ impl Interp<'_> {
             }
             return Ok(e);
         }
+        chk!(
+            (b.radius.is_some() || b.theta.is_some()) && (b.has(b'x') || b.has(b'y')),
+            "Cannot specify X or Y words with polar coordinate"
+        );
         if self.distance_mode == Distance::Absolute {
             e[X] = b.get(b'x').unwrap_or(if comp && middle {
                 self.program[0]
@@ -127,18 +129,10 @@ impl Interp<'_> {
                 });
             match (b.radius, b.theta) {
                 (Some(r), Some(t)) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     e[X] = r * t.to_radians().cos();
                     e[Y] = r * t.to_radians().sin();
                 }
                 (Some(r), None) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     chk!(
                         e[Y] == 0.0 && e[X] == 0.0,
                         "Must specify angle in polar coordinate if at the origin"
@@ -148,10 +142,6 @@ impl Interp<'_> {
                     e[Y] = r * theta.sin();
                 }
                 (None, Some(t)) => {
-                    chk!(
-                        b.has(b'x') || b.has(b'y'),
-                        "Cannot specify X or Y words with polar coordinate"
-                    );
                     let radius = e[Y].hypot(e[X]);
                     e[X] = radius * t.to_radians().cos();
                     e[Y] = radius * t.to_radians().sin();
@@ -187,10 +177,6 @@ impl Interp<'_> {
             }) + b.or(b'y', 0.0);
             if let Some(r) = b.radius {
                 chk!(
-                    b.has(b'x') || b.has(b'y'),
-                    "Cannot specify X or Y words with polar coordinate"
-                );
-                chk!(
                     e[Y] == 0.0 && e[X] == 0.0,
                     "Incremental motion with polar coordinates is indeterminate when at the origin"
                 );
@@ -200,10 +186,6 @@ impl Interp<'_> {
                 e[Y] = radius * theta.sin();
             }
             if let Some(t) = b.theta {
-                chk!(
-                    b.has(b'x') || b.has(b'y'),
-                    "Cannot specify X or Y words with polar coordinate"
-                );
                 chk!(
                     e[Y] == 0.0 && e[X] == 0.0,
                     "G91 motion with polar coordinates is indeterminate when at the origin"
@@ -404,25 +386,13 @@ impl Interp<'_> {
                 self.cur = end;
             }
             g::G33 => {
-                self.check_synced_spindle("G33", b)?;
-                let k = b.or(b'k', 0.0);
-                self.emit(CanonCmd::StartSpeedFeedSync {
-                    spindle: self.active_spindle,
-                    mm_per_rev: self.len_mm(k),
-                    velocity_mode: false,
-                });
+                self.start_position_sync("G33", b)?;
                 self.canon_straight_feed(end);
                 self.emit(CanonCmd::StopSpeedFeedSync);
                 self.cur = end;
             }
             g::G33_1 => {
-                self.check_synced_spindle("G33.1", b)?;
-                let k = b.or(b'k', 0.0);
-                self.emit(CanonCmd::StartSpeedFeedSync {
-                    spindle: self.active_spindle,
-                    mm_per_rev: self.len_mm(k),
-                    velocity_mode: false,
-                });
+                self.start_position_sync("G33.1", b)?;
                 let scale = b.get(b'i').map(|i| i.max(1.0)).unwrap_or(1.0);
                 self.canon_rigid_tap(end, scale);
                 self.emit(CanonCmd::StopSpeedFeedSync);
@@ -438,6 +408,19 @@ impl Interp<'_> {
             }
         }
         self.cur[3..9].copy_from_slice(&rest);
+        Ok(())
+    }
+
+    /// Check the spindle for `code` and lock following moves to it at K
+    /// program units per revolution.
+    fn start_position_sync(&mut self, code: &str, b: &Block) -> R {
+        self.check_synced_spindle(code, b)?;
+        let k = b.or(b'k', 0.0);
+        self.emit(CanonCmd::StartSpeedFeedSync {
+            spindle: self.active_spindle,
+            mm_per_rev: self.len_mm(k),
+            velocity_mode: false,
+        });
         Ok(())
     }
 
@@ -700,11 +683,10 @@ impl Interp<'_> {
         if half_length / abs_radius > 1.0 - TINY {
             half_length = abs_radius;
         }
-        let theta = if (mv == g::G2 && radius > 0.0) || (mv == g::G3 && radius < 0.0) {
-            (ey - cy).atan2(ex - cx) - FRAC_PI_2
-        } else {
-            (ey - cy).atan2(ex - cx) + FRAC_PI_2
-        };
+        // LinuxCNC adds the long double M_PI_2l; rounding the same way keeps
+        // centres that land on zero on the same side.
+        let clockwise_short = (mv == g::G2 && radius > 0.0) || (mv == g::G3 && radius < 0.0);
+        let theta = crate::ld::add_half_pi((ey - cy).atan2(ex - cx), clockwise_short);
         let turn2 = (half_length / abs_radius).asin();
         let offset = abs_radius * turn2.cos();
         let center = [mid_x + offset * theta.cos(), mid_y + offset * theta.sin()];

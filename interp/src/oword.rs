@@ -10,9 +10,51 @@ use crate::block::{CallType, OType, SUB_PARAMS};
 use crate::error::{bail, chk, Fault, R};
 use crate::interp::{ExecStatus, Interp, Label, MAX_CALL_LEVELS};
 
+/// LinuxCNC words its duplicate-label error two ways (loops and `if`).
+#[derive(Clone, Copy)]
+enum LabelWording {
+    DefinedIn,
+    AlreadyDefined,
+}
+
 impl Interp<'_> {
+    /// The current block's label, which must have been seen.
+    fn defined_label(&self) -> R<Label> {
+        self.find_label()
+            .cloned()
+            .ok_or_else(|| self.undefined_label())
+    }
+
     fn line_text(&self) -> String {
         String::from_utf8_lossy(&self.raw).into_owned()
+    }
+
+    /// At the opening line of a loop or `if`: remember the label the first
+    /// time; on a later pass the label must be this very line (a second
+    /// block with the same label is an error). With `after_do`, a label
+    /// left by a `do` is the loop's own.
+    fn enter_control_label(&mut self, after_do: bool, wording: LabelWording) -> R {
+        let Some(op) = self.find_label() else {
+            return self.control_save_offset();
+        };
+        let defined = op.sequence_number.wrapping_add(1);
+        if (after_do && op.kind == OType::Do) || self.sequence_number == defined {
+            return Ok(());
+        }
+        match wording {
+            LabelWording::DefinedIn => bail!(
+                "{}: duplicate O-word label: '{}' - defined in line {}",
+                self.sequence_number,
+                self.line_text(),
+                defined
+            ),
+            LabelWording::AlreadyDefined => bail!(
+                "{}: duplicate O-word label - already defined in line {}: '{}'",
+                self.sequence_number,
+                defined,
+                self.line_text()
+            ),
+        }
     }
 
     /// Remember the current block's label and where its line is.
@@ -303,18 +345,7 @@ impl Interp<'_> {
                 }
             }
             OType::Repeat => {
-                if let Some(op) = self.find_label() {
-                    if self.sequence_number != op.sequence_number.wrapping_add(1) {
-                        bail!(
-                            "{}: duplicate O-word label: '{}' - defined in line {}",
-                            self.sequence_number,
-                            self.line_text(),
-                            op.sequence_number.wrapping_add(1)
-                        );
-                    }
-                } else {
-                    self.control_save_offset()?;
-                }
+                self.enter_control_label(false, LabelWording::DefinedIn)?;
                 self.skipping_o = None;
                 let name = self.block.o_name.clone();
                 let test = self.test_value;
@@ -339,20 +370,8 @@ impl Interp<'_> {
                 }
             }
             OType::While => {
-                if let Some(op) = self.find_label() {
-                    if op.kind != OType::Do
-                        && self.sequence_number != op.sequence_number.wrapping_add(1)
-                    {
-                        bail!(
-                            "{}: duplicate O-word label: '{}' - defined in line {}",
-                            self.sequence_number,
-                            self.line_text(),
-                            op.sequence_number.wrapping_add(1)
-                        );
-                    }
-                } else {
-                    self.control_save_offset()?;
-                }
+                // The `while` that closes a `do` shares the do's label.
+                self.enter_control_label(true, LabelWording::DefinedIn)?;
                 self.skipping_o = None;
                 let kind = self.find_label().map(|op| op.kind);
                 if kind == Some(OType::While) {
@@ -368,18 +387,7 @@ impl Interp<'_> {
                 }
             }
             OType::If => {
-                if let Some(op) = self.find_label() {
-                    if self.sequence_number != op.sequence_number.wrapping_add(1) {
-                        bail!(
-                            "{}: duplicate O-word label - already defined in line {}: '{}'",
-                            self.sequence_number,
-                            op.sequence_number.wrapping_add(1),
-                            self.line_text()
-                        );
-                    }
-                } else {
-                    self.control_save_offset()?;
-                }
+                self.enter_control_label(false, LabelWording::AlreadyDefined)?;
                 if self.test_value != 0.0 {
                     self.skipping_o = None;
                     self.executed_if = true;
@@ -390,10 +398,7 @@ impl Interp<'_> {
                 }
             }
             OType::ElseIf => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if op.kind != OType::If {
                     return Err(self.no_matching(&op, "'if'"));
                 }
@@ -415,10 +420,7 @@ impl Interp<'_> {
                 }
             }
             OType::Else => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if op.kind != OType::If {
                     return Err(self.no_matching(&op, "'if'"));
                 }
@@ -433,10 +435,7 @@ impl Interp<'_> {
                 }
             }
             OType::EndIf => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if op.kind != OType::If {
                     return Err(self.no_matching(&op, ""));
                 }
@@ -444,10 +443,7 @@ impl Interp<'_> {
                 self.executed_if = true;
             }
             OType::Break => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if op.kind != OType::While && op.kind != OType::Do {
                     return Err(self.no_matching(&op, "while/do"));
                 }
@@ -456,10 +452,7 @@ impl Interp<'_> {
                 self.doing_break = true;
             }
             OType::Continue => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if op.kind != OType::While && op.kind != OType::Do {
                     return Err(self.no_matching(&op, "while/do"));
                 }
@@ -471,10 +464,7 @@ impl Interp<'_> {
                 self.doing_continue = true;
             }
             OType::EndRepeat | OType::EndWhile => {
-                let op = self
-                    .find_label()
-                    .cloned()
-                    .ok_or_else(|| self.undefined_label())?;
+                let op = self.defined_label()?;
                 if (self.block.o_type == OType::EndRepeat && op.kind != OType::Repeat)
                     || (self.block.o_type == OType::EndWhile && op.kind != OType::While)
                 {

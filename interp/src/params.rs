@@ -110,7 +110,11 @@ impl Interp<'_> {
                 None => p.value,
             }));
         }
-        if self.cfg.ini_vars && name.len() > 5 && name[..5].eq_ignore_ascii_case("_ini[") {
+        if self.cfg.ini_vars
+            && name
+                .get(..5)
+                .is_some_and(|p| p.eq_ignore_ascii_case("_ini["))
+        {
             if let Some(v) = self.fetch_ini_param(name)? {
                 self.contexts[0].named.insert(
                     name.to_string(),
@@ -129,7 +133,7 @@ impl Interp<'_> {
 
     /// `#<_ini[section]key>`: the INI value, names matched in upper case.
     fn fetch_ini_param(&self, name: &str) -> R<Option<f64>> {
-        let Some(close) = name[6.min(name.len())..].find(']').map(|i| i + 6) else {
+        let Some(close) = name.get(6..).and_then(|r| r.find(']')).map(|i| i + 6) else {
             return Ok(None);
         };
         let Some(ini) = &self.cfg.ini else {

@@ -9,28 +9,9 @@
 use crate::block::{g, g_group, gm, is_cycle, m_group, Block, CallType, OType, SUB_PARAMS};
 use crate::error::{chk, Fault, R};
 use crate::interp::{Interp, Side};
+use crate::lex::{self, Func, Op};
 
-/// Binary operators, with LinuxCNC's precedence.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Op {
-    RightBracket,
-    DividedBy,
-    Modulo,
-    Power,
-    Times,
-    And,
-    Xor,
-    Minus,
-    Or,
-    Plus,
-    Lt,
-    Eq,
-    Ne,
-    Le,
-    Ge,
-    Gt,
-}
-
+/// LinuxCNC's operator precedence (higher binds tighter).
 fn precedence(op: Op) -> u8 {
     match op {
         Op::RightBracket => 1,
@@ -40,25 +21,6 @@ fn precedence(op: Op) -> u8 {
         Op::DividedBy | Op::Modulo | Op::Times => 5,
         Op::Power => 6,
     }
-}
-
-/// Unary functions.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Func {
-    Abs,
-    Acos,
-    Asin,
-    Atan,
-    Cos,
-    Exp,
-    Exists,
-    Fix,
-    Fup,
-    Ln,
-    Round,
-    Sin,
-    Sqrt,
-    Tan,
 }
 
 /// Two numbers are equal for EQ and NE if they differ by less than this.
@@ -113,13 +75,13 @@ fn unary(v: f64, f: Func) -> R<f64> {
         Func::Abs => v.abs(),
         Func::Acos => {
             chk!(!(-1.0..=1.0).contains(&v), "Argument to acos out of range");
-            v.acos().to_degrees()
+            crate::ld::degrees(v.acos())
         }
         Func::Asin => {
             chk!(!(-1.0..=1.0).contains(&v), "Argument to asin out of range");
-            v.asin().to_degrees()
+            crate::ld::degrees(v.asin())
         }
-        Func::Cos => v.to_radians().cos(),
+        Func::Cos => crate::ld::cos_deg(v),
         Func::Exp => v.exp(),
         Func::Fix => v.floor(),
         Func::Fup => v.ceil(),
@@ -131,12 +93,12 @@ fn unary(v: f64, f: Func) -> R<f64> {
             let r = v + if v < 0.0 { -0.5 } else { 0.5 };
             (r as i64) as f64
         }
-        Func::Sin => v.to_radians().sin(),
+        Func::Sin => crate::ld::sin_deg(v),
         Func::Sqrt => {
             chk!(v < 0.0, "Negative argument to sqrt");
             v.sqrt()
         }
-        Func::Tan => v.to_radians().tan(),
+        Func::Tan => crate::ld::tan_deg(v),
         Func::Exists | Func::Atan => v,
     })
 }
@@ -165,43 +127,62 @@ impl Interp<'_> {
     pub(crate) fn close_and_downcase(&mut self) -> R {
         self.line.clear();
         self.cols.clear();
-        let mut comment = false;
-        let mut semicomment = false;
+        let raw = &self.raw;
+        self.line.reserve(raw.len());
+        self.cols.reserve(raw.len());
         let mut col: u32 = 0;
-        for i in 0..self.raw.len() {
-            let c = self.raw[i];
-            if c & 0xC0 != 0x80 {
+        let mut i = 0;
+        while i < raw.len() {
+            let c = raw[i];
+            i += 1;
+            // Columns count characters: UTF-8 continuation bytes belong to
+            // the character before them (a stray one at the start still
+            // takes column 1).
+            if c & 0xC0 != 0x80 || col == 0 {
                 col += 1;
             }
-            if c == b';' && !comment {
-                semicomment = true;
-            }
-            if semicomment {
-                self.line.push(c);
-                self.cols.push(col);
-                continue;
-            }
-            if comment {
-                self.line.push(c);
-                self.cols.push(col);
-                if c == b')' {
-                    comment = false;
-                } else if c == b'(' {
-                    return Err(Fault::at(col, "Nested comment found"));
+            match c {
+                b' ' | b'\t' | b'\r' => {}
+                b';' => {
+                    // A remark: the rest of the line as written.
+                    self.line.push(c);
+                    self.cols.push(col);
+                    for &c in &raw[i..] {
+                        if c & 0xC0 != 0x80 {
+                            col += 1;
+                        }
+                        self.line.push(c);
+                        self.cols.push(col);
+                    }
+                    return Ok(());
                 }
-            } else if c == b' ' || c == b'\t' || c == b'\r' {
-            } else if c.is_ascii_uppercase() {
-                self.line.push(c.to_ascii_lowercase());
-                self.cols.push(col);
-            } else {
-                if c == b'(' {
-                    comment = true;
+                b'(' => {
+                    // A comment, as written, up to its `)`.
+                    self.line.push(c);
+                    self.cols.push(col);
+                    loop {
+                        let Some(&c) = raw.get(i) else {
+                            return Err(Fault::new("Unclosed comment found"));
+                        };
+                        i += 1;
+                        if c & 0xC0 != 0x80 {
+                            col += 1;
+                        }
+                        self.line.push(c);
+                        self.cols.push(col);
+                        match c {
+                            b')' => break,
+                            b'(' => return Err(Fault::at(col, "Nested comment found")),
+                            _ => {}
+                        }
+                    }
                 }
-                self.line.push(c);
-                self.cols.push(col);
+                _ => {
+                    self.line.push(c.to_ascii_lowercase());
+                    self.cols.push(col);
+                }
             }
         }
-        chk!(comment, "Unclosed comment found");
         Ok(())
     }
 
@@ -332,12 +313,20 @@ impl Interp<'_> {
                 column: Some(self.col_at(start)),
             });
         }
-        let mut value = self.read_real_value(counter)?;
-        match letter {
-            b'f' => chk!(value < 0.0, "Negative f word used"),
-            b's' => chk!(value < 0.0, "Negative spindle speed used"),
-            b'x' if self.lathe_diameter_mode => value /= 2.0,
-            _ => {}
+        let word = || (letter.to_ascii_uppercase() as char).to_string();
+        let mut value = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(word, col))?;
+        let negative = match letter {
+            b'f' => Some("Negative f word used"),
+            b's' => Some("Negative spindle speed used"),
+            _ => None,
+        };
+        if let Some(message) = negative.filter(|_| value < 0.0) {
+            return Err(Fault::new(message).in_word(word, col));
+        }
+        if letter == b'x' && self.lathe_diameter_mode {
+            value /= 2.0;
         }
         block.set(letter, value);
         block.cols[(letter - b'a') as usize] = col;
@@ -356,12 +345,18 @@ impl Interp<'_> {
                 column: Some(self.col_at(start)),
             });
         }
-        let value = self.read_integer_value(counter)?;
-        match letter {
-            b'h' => chk!(value < -1, "Negative h word used"),
-            b'l' => chk!(value < 0, "Negative l word used"),
-            b't' => chk!(value < 0, "Negative tool id (tool not found)"),
-            _ => {}
+        let word = || (letter.to_ascii_uppercase() as char).to_string();
+        let value = self
+            .read_integer_value(counter)
+            .map_err(|f| f.in_word(word, col))?;
+        let negative = match letter {
+            b'h' => (value < -1).then_some("Negative h word used"),
+            b'l' => (value < 0).then_some("Negative l word used"),
+            b't' => (value < 0).then_some("Negative tool id (tool not found)"),
+            _ => None,
+        };
+        if let Some(message) = negative {
+            return Err(Fault::new(message).in_word(word, col));
         }
         block.set(letter, value as f64);
         block.cols[(letter - b'a') as usize] = col;
@@ -369,21 +364,22 @@ impl Interp<'_> {
     }
 
     fn read_comment(&mut self, counter: &mut usize, block: &mut Block) -> R {
-        *counter += 1;
-        let start = *counter;
-        while *counter < self.line.len() && self.ch(*counter) != b')' {
-            *counter += 1;
-        }
-        let text = String::from_utf8_lossy(&self.line[start..*counter]).into_owned();
-        block.comment = Some(text);
-        *counter += 1;
+        // The line was folded, so every `(` has its `)`.
+        let rest = &self.line[*counter..];
+        let (after, body) =
+            lex::comment(rest).map_err(|_| self.fault_at(*counter, "Unclosed comment found"))?;
+        block.comment = Some(String::from_utf8_lossy(body).into_owned());
+        *counter += rest.len() - after.len();
         Ok(())
     }
 
     fn read_g(&mut self, counter: &mut usize, block: &mut Block) -> R {
         let col = self.col_at(*counter);
         *counter += 1;
-        let read = self.read_real_value(counter)? * 10.0;
+        let read = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(|| "G".into(), col))?
+            * 10.0;
         let mut value = read.floor() as i64;
         if read - value as f64 > 0.999 {
             value = read.ceil() as i64;
@@ -432,7 +428,9 @@ impl Interp<'_> {
     fn read_m(&mut self, counter: &mut usize, block: &mut Block) -> R {
         let col = self.col_at(*counter);
         *counter += 1;
-        let value = self.read_integer_value(counter)?;
+        let value = self
+            .read_integer_value(counter)
+            .map_err(|f| f.in_word(|| "M".into(), col))?;
         let at = |message: String| Fault {
             message,
             word: Some(format!("M{value}")),
@@ -477,20 +475,12 @@ impl Interp<'_> {
 
     fn read_integer_unsigned(&mut self, counter: &mut usize) -> R<i64> {
         let start = *counter;
-        let mut n = start;
-        while self.ch(n).is_ascii_digit() {
-            n += 1;
-        }
-        if n == start {
-            return Err(self.fault_at(start, "Bad format unsigned integer"));
-        }
-        let mut v: i64 = 0;
-        for i in start..n {
-            v = v
-                .saturating_mul(10)
-                .saturating_add((self.ch(i) - b'0') as i64);
-        }
-        *counter = n;
+        let (_, digits) = lex::unsigned_integer(&self.line[start..])
+            .map_err(|_| self.fault_at(start, "Bad format unsigned integer"))?;
+        let v = digits.iter().fold(0i64, |v, &d| {
+            v.saturating_mul(10).saturating_add((d - b'0') as i64)
+        });
+        *counter = start + digits.len();
         Ok(v.min(i32::MAX as i64))
     }
 
@@ -513,7 +503,22 @@ impl Interp<'_> {
 
     /// A real value: a number, a parameter, an expression in brackets, a
     /// function, or a sign before any of those.
+    ///
+    /// Values nest (brackets, functions, signs, `##` indirection), each
+    /// level a recursive call; the depth is bounded so that a hostile line
+    /// gets an error rather than exhausting the stack.
     pub(crate) fn read_real_value(&mut self, counter: &mut usize) -> R<f64> {
+        const MAX_NESTING: u32 = 100;
+        if self.value_depth >= MAX_NESTING {
+            return Err(self.fault_at(*counter, "Expression nested too deeply"));
+        }
+        self.value_depth += 1;
+        let v = self.read_real_value_nested(counter);
+        self.value_depth -= 1;
+        v
+    }
+
+    fn read_real_value_nested(&mut self, counter: &mut usize) -> R<f64> {
         let c = self.ch(*counter);
         if c == 0 {
             return Err(self.fault_at(*counter, "No characters found in reading real value"));
@@ -543,43 +548,23 @@ impl Interp<'_> {
     /// stream extraction reads them.
     fn read_real_number(&mut self, counter: &mut usize) -> R<f64> {
         let start = *counter;
-        let mut end = start;
-        while matches!(self.ch(end), b'+' | b'-') {
-            end += 1;
-        }
-        while matches!(self.ch(end), b'0'..=b'9' | b'.') {
-            end += 1;
-        }
-        let text = &self.line[start..end];
-        let shown = || String::from_utf8_lossy(text).into_owned();
-        // One optional sign, then digits with at most one point.
-        let mut i = 0;
-        if i < text.len() && (text[i] == b'+' || text[i] == b'-') {
-            i += 1;
-        }
-        let body_start = i;
-        let mut digits = 0;
-        while i < text.len() && text[i].is_ascii_digit() {
-            i += 1;
-            digits += 1;
-        }
-        if i < text.len() && text[i] == b'.' {
-            i += 1;
-            while i < text.len() && text[i].is_ascii_digit() {
-                i += 1;
-                digits += 1;
-            }
-        }
-        if digits == 0 {
-            return Err(self.fault_at(
+        // LinuxCNC takes the run of signs, digits and points, then asks the
+        // converter to read all of it: one sign and one decimal.
+        let span = match lex::number_span(&self.line[start..]) {
+            Ok((_, span)) => span,
+            Err(_) => &[],
+        };
+        let shown = || String::from_utf8_lossy(span).into_owned();
+        let (rest, (negative, body)) = lex::signed_decimal(span).map_err(|_| {
+            self.fault_at(
                 start,
                 format!(
                     "bad number format (conversion failed) parsing '{}'",
                     shown()
                 ),
-            ));
-        }
-        if i != text.len() {
+            )
+        })?;
+        if !rest.is_empty() {
             return Err(self.fault_at(
                 start,
                 format!(
@@ -588,12 +573,9 @@ impl Interp<'_> {
                 ),
             ));
         }
-        let mut v: f64 = fast_parse(&text[body_start..i]);
-        if text[0] == b'-' {
-            v = -v;
-        }
-        *counter = end;
-        Ok(v)
+        let v = fast_parse(body);
+        *counter = start + span.len();
+        Ok(if negative { -v } else { v })
     }
 
     fn read_real_expression(&mut self, counter: &mut usize) -> R<f64> {
@@ -627,136 +609,44 @@ impl Interp<'_> {
 
     fn read_operation(&mut self, counter: &mut usize) -> R<Op> {
         let at = *counter;
-        let c = self.ch(at);
-        *counter += 1;
-        let next = self.ch(*counter);
-        let next2 = self.ch(*counter + 1);
-        let mut two = |op: Op, a: u8, b: u8, msg: &str| -> R<Op> {
-            if next == a && next2 == b {
-                *counter += 2;
-                Ok(op)
-            } else {
-                Err(self.fault_at(at, msg))
-            }
+        let rest = &self.line[at..];
+        if let Ok((after, op)) = lex::operation(rest) {
+            *counter += rest.len() - after.len();
+            return Ok(op);
+        }
+        let message = match self.ch(at) {
+            0 => "Unclosed expression",
+            b'a' => "Unknown operation name starting with a",
+            b'm' => "Unknown operation name starting with m",
+            b'x' => "Unknown operation name starting with x",
+            b'o' => "Unknown operation name starting with o",
+            b'e' => "Unknown operation name starting with e",
+            b'n' => "Unknown operation name starting with n",
+            b'g' => "Unknown operation name starting with g",
+            b'l' => "Unknown operation name starting with l",
+            _ => "Unknown operation",
         };
-        Ok(match c {
-            b'+' => Op::Plus,
-            b'-' => Op::Minus,
-            b'/' => Op::DividedBy,
-            b'*' => {
-                if next == b'*' {
-                    *counter += 1;
-                    Op::Power
-                } else {
-                    Op::Times
-                }
-            }
-            b']' => Op::RightBracket,
-            b'a' => two(
-                Op::And,
-                b'n',
-                b'd',
-                "Unknown operation name starting with a",
-            )?,
-            b'm' => two(
-                Op::Modulo,
-                b'o',
-                b'd',
-                "Unknown operation name starting with m",
-            )?,
-            b'x' => two(
-                Op::Xor,
-                b'o',
-                b'r',
-                "Unknown operation name starting with x",
-            )?,
-            b'o' => {
-                if next == b'r' {
-                    *counter += 1;
-                    Op::Or
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with o"));
-                }
-            }
-            b'e' => {
-                if next == b'q' {
-                    *counter += 1;
-                    Op::Eq
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with e"));
-                }
-            }
-            b'n' => {
-                if next == b'e' {
-                    *counter += 1;
-                    Op::Ne
-                } else {
-                    return Err(self.fault_at(at, "Unknown operation name starting with n"));
-                }
-            }
-            b'g' => match next {
-                b'e' => {
-                    *counter += 1;
-                    Op::Ge
-                }
-                b't' => {
-                    *counter += 1;
-                    Op::Gt
-                }
-                _ => return Err(self.fault_at(at, "Unknown operation name starting with g")),
-            },
-            b'l' => match next {
-                b'e' => {
-                    *counter += 1;
-                    Op::Le
-                }
-                b't' => {
-                    *counter += 1;
-                    Op::Lt
-                }
-                _ => return Err(self.fault_at(at, "Unknown operation name starting with l")),
-            },
-            0 => return Err(self.fault_at(at, "Unclosed expression")),
-            _ => return Err(self.fault_at(at, "Unknown operation")),
-        })
-    }
-
-    fn starts(&self, at: usize, word: &[u8]) -> bool {
-        self.line.get(at..at + word.len()) == Some(word)
+        Err(self.fault_at(at, message))
     }
 
     fn read_unary(&mut self, counter: &mut usize) -> R<f64> {
         let at = *counter;
-        let c = self.ch(at);
-        let p = at + 1;
-        let (func, len) = match c {
-            b'a' if self.starts(p, b"bs") => (Func::Abs, 2),
-            b'a' if self.starts(p, b"cos") => (Func::Acos, 3),
-            b'a' if self.starts(p, b"sin") => (Func::Asin, 3),
-            b'a' if self.starts(p, b"tan") => (Func::Atan, 3),
-            b'a' => return Err(self.fault_at(at, "Unknown word starting with a")),
-            b'c' if self.starts(p, b"os") => (Func::Cos, 2),
-            b'c' => return Err(self.fault_at(at, "Unknown word starting with c")),
-            b'e' if self.starts(p, b"xp") => (Func::Exp, 2),
-            b'e' if self.starts(p, b"xists") => (Func::Exists, 5),
-            b'e' => return Err(self.fault_at(at, "Unknown word starting with e")),
-            b'f' if self.starts(p, b"ix") => (Func::Fix, 2),
-            b'f' if self.starts(p, b"up") => (Func::Fup, 2),
-            b'f' => return Err(self.fault_at(at, "Unknown word starting with f")),
-            b'l' if self.starts(p, b"n") => (Func::Ln, 1),
-            b'l' => return Err(self.fault_at(at, "Unknown word starting with l")),
-            b'r' if self.starts(p, b"ound") => (Func::Round, 4),
-            b'r' => return Err(self.fault_at(at, "Unknown word starting with r")),
-            b's' if self.starts(p, b"in") => (Func::Sin, 2),
-            b's' if self.starts(p, b"qrt") => (Func::Sqrt, 3),
-            b's' => return Err(self.fault_at(at, "Unknown word starting with s")),
-            b't' if self.starts(p, b"an") => (Func::Tan, 2),
-            b't' => return Err(self.fault_at(at, "Unknown word starting with t")),
-            _ => {
-                return Err(self.fault_at(at, "Unknown word where unary operation could be"));
+        let rest = &self.line[at..];
+        let func = match lex::function(rest) {
+            Ok((after, func)) => {
+                *counter += rest.len() - after.len();
+                func
+            }
+            Err(_) => {
+                let c = self.ch(at);
+                let message = if b"acefflrst".contains(&c) {
+                    format!("Unknown word starting with {}", c as char)
+                } else {
+                    "Unknown word where unary operation could be".to_string()
+                };
+                return Err(self.fault_at(at, message));
             }
         };
-        *counter = p + len;
         if self.ch(*counter) != b'[' {
             return Err(self.fault_at(*counter, "Left bracket missing after unary operation name"));
         }
@@ -782,7 +672,7 @@ impl Interp<'_> {
                 return Err(self.fault_at(*counter, "Left bracket missing after slash with atan"));
             }
             let v2 = self.read_real_expression(counter)?;
-            return Ok(v.atan2(v2).to_degrees());
+            return Ok(crate::ld::degrees(v.atan2(v2)));
         }
         unary(v, func)
     }
@@ -823,29 +713,28 @@ impl Interp<'_> {
     /// `<name>`: the characters up to `>`.
     fn read_name(&mut self, counter: &mut usize) -> R<String> {
         let start = *counter;
-        *counter += 1;
-        let from = *counter;
-        while *counter < self.line.len() {
-            if self.ch(*counter) == b'>' {
-                let name = String::from_utf8_lossy(&self.line[from..*counter]).into_owned();
-                *counter += 1;
-                return Ok(name);
-            }
-            *counter += 1;
-        }
-        Err(self.fault_at(start, "Named parameter not terminated"))
+        let rest = &self.line[start..];
+        let (after, name) = lex::bracketed_name(rest)
+            .map_err(|_| self.fault_at(start, "Named parameter not terminated"))?;
+        *counter += rest.len() - after.len();
+        Ok(String::from_utf8_lossy(name).into_owned())
     }
 
     fn read_parameter_setting(&mut self, counter: &mut usize, block: &mut Block) -> R {
+        let col = self.col_at(*counter);
         *counter += 1;
         if self.ch(*counter) == b'<' {
             let name = self.read_name(counter)?;
-            self.add_named_param(&name, false)?;
+            let word = || format!("#<{name}>");
+            self.add_named_param(&name, false)
+                .map_err(|f| f.in_word(word, col))?;
             if self.ch(*counter) != b'=' {
                 return Err(self.fault_at(*counter, "Equal sign missing in parameter setting"));
             }
             *counter += 1;
-            let value = self.read_real_value(counter)?;
+            let value = self
+                .read_real_value(counter)
+                .map_err(|f| f.in_word(word, col))?;
             block.assign_named.push((name, value));
             return Ok(());
         }
@@ -861,7 +750,9 @@ impl Interp<'_> {
             return Err(self.fault_at(*counter, "Equal sign missing in parameter setting"));
         }
         *counter += 1;
-        let value = self.read_real_value(counter)?;
+        let value = self
+            .read_real_value(counter)
+            .map_err(|f| f.in_word(|| format!("#{index}"), col))?;
         block.assign_numbered.push((index as usize, value));
         Ok(())
     }
@@ -916,31 +807,14 @@ impl Interp<'_> {
                 let v = self.read_integer_value(counter)?;
                 name = v.to_string();
             }
-            const WORDS: [(&[u8], OType); 15] = [
-                (b"sub", OType::Sub),
-                (b"endsub", OType::EndSub),
-                (b"call", OType::Call),
-                (b"do", OType::Do),
-                (b"while", OType::While),
-                (b"repeat", OType::Repeat),
-                (b"if", OType::If),
-                (b"elseif", OType::ElseIf),
-                (b"else", OType::Else),
-                (b"endif", OType::EndIf),
-                (b"break", OType::Break),
-                (b"continue", OType::Continue),
-                (b"endwhile", OType::EndWhile),
-                (b"endrepeat", OType::EndRepeat),
-                (b"return", OType::Return),
-            ];
-            block.o_type = OType::None;
-            for (word, kind) in WORDS {
-                if self.starts(*counter, word) {
-                    *counter += word.len();
-                    block.o_type = kind;
-                    break;
+            let rest = &self.line[*counter..];
+            block.o_type = match lex::o_keyword(rest) {
+                Ok((after, kind)) => {
+                    *counter += rest.len() - after.len();
+                    kind
                 }
-            }
+                Err(_) => OType::None,
+            };
             if block.o_type == OType::None {
                 let c = self.ch(*counter);
                 if c == b'(' || c == b';' || c == 0 {
@@ -1095,14 +969,7 @@ impl Interp<'_> {
                     (polar || axis_flag) && !covets,
                     "Cannot use axis values with g80"
                 );
-                chk!(
-                    polar && mode0 == g::G92,
-                    "Polar coordinates can only be used for motion"
-                );
-                chk!(
-                    !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
-                    "All axes missing with g52 or g92"
-                );
+                check_offset_words(mode0, polar, axis_flag)?;
             } else {
                 chk!(covets, "Cannot use two g codes that both use axis values");
                 chk!(
@@ -1129,14 +996,7 @@ impl Interp<'_> {
             }
             block.motion_to_be = mode1;
         } else if covets {
-            chk!(
-                polar && mode0 == g::G92,
-                "Polar coordinates can only be used for motion"
-            );
-            chk!(
-                !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
-                "All axes missing with g52 or g92"
-            );
+            check_offset_words(mode0, polar, axis_flag)?;
         } else if axis_flag || polar {
             let tlo = block.g_modes[gm::TOOL_LENGTH_OFFSET];
             chk!(
@@ -1406,6 +1266,19 @@ impl Interp<'_> {
         }
         Ok(())
     }
+}
+
+/// G52 and G92 need axis words, and plain ones.
+fn check_offset_words(mode0: i32, polar: bool, axis_flag: bool) -> R {
+    chk!(
+        polar && mode0 == g::G92,
+        "Polar coordinates can only be used for motion"
+    );
+    chk!(
+        !axis_flag && (mode0 == g::G52 || mode0 == g::G92),
+        "All axes missing with g52 or g92"
+    );
+    Ok(())
 }
 
 /// Parse an unsigned decimal number of digits and at most one point.

@@ -23,6 +23,7 @@ pub struct ToolTable {
 pub struct ToolTableError {
     /// 1-based line number.
     pub line: usize,
+    /// What is wrong with it.
     pub message: String,
 }
 
@@ -94,7 +95,10 @@ impl ToolTable {
                 continue;
             }
             let letter = token.as_bytes()[0].to_ascii_uppercase();
-            let rest = &token[1..];
+            // A token starting with a non-ASCII character is no word.
+            let Some(rest) = token.get(1..) else {
+                return Err(format!("unknown word {token:?}"));
+            };
             let real = || {
                 crate::ini::leading_number(rest).ok_or_else(|| format!("bad number in {token:?}"))
             };

@@ -23,6 +23,7 @@ pub enum Format {
 /// Options of `kerf canon`.
 #[derive(Clone, Debug, Default)]
 pub struct CanonOptions {
+    /// How to print the stream.
     pub format: Format,
     /// LinuxCNC tool table (`.tbl`).
     pub tool_table: Option<PathBuf>,
