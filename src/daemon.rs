@@ -1446,6 +1446,7 @@ fn skipped_before_start(cmd: &CanonCmd) -> bool {
         | CanonCmd::ClearAuxOutputBit { .. }
         | CanonCmd::SetAuxOutputValue { .. }
         | CanonCmd::UserMCode { .. }
+        | CanonCmd::ForceControl { .. }
         | CanonCmd::Comment(_)
         | CanonCmd::Finish
         | CanonCmd::ProgramEnd => false,

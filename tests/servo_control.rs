@@ -139,7 +139,8 @@ fn the_program_and_the_operator_switch_force_control() {
     let (mut producer, consumer) = rtrb::RingBuffer::new(64);
     let (mut commands, command_queue) = rtrb::RingBuffer::new(4);
     commands.push(ServoCommand::Enable(true)).unwrap();
-    // Line 1 without force control, line 2 with 300 N, line 3 off again.
+    // The first move without force control, the second with 300 N, the
+    // third off again: kerf's M170 P / M171, in step with the motion.
     let mut planner = Planner::new(
         &*kins,
         Position::ZERO,
@@ -148,11 +149,8 @@ fn the_program_and_the_operator_switch_force_control() {
             ..PlannerConfig::default()
         },
     );
-    for canon in program("G1 X5 F600\nX10\nX15\nM2\n") {
-        let canon = canon.unwrap();
-        // What the program's M-code will do: here, by source line.
-        planner.set_force_control((canon.source.line == 2).then_some(300.0));
-        planner.plan(&canon).unwrap();
+    for canon in program("G1 X5 F600\nM170 P300\nX10\nM171\nX15\nM2\n") {
+        planner.plan(&canon.unwrap()).unwrap();
     }
     planner.finish();
     while let Some(seg) = planner.next_segment() {

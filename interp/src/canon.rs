@@ -647,6 +647,13 @@ pub enum CanonCmd {
         /// Longest wait, seconds (Q word).
         timeout: f64,
     },
+    /// Cutting-force control (kerf's M170 P*force* / M171, see
+    /// `docs/control.md`): on, holding `target` newtons, or off (`None`).
+    /// Takes effect with the next move, in step with the motion.
+    ForceControl {
+        /// Target cutting force, N; `None` turns the controller off.
+        target: Option<f64>,
+    },
     /// Run user M-code program `M{number}` with its P and Q values (M100–M199).
     UserMCode {
         /// 100 to 199.
@@ -862,6 +869,8 @@ impl fmt::Display for CanonCmd {
                 "wait {} input {index} mode {mode} timeout {timeout:.4} s",
                 if *digital { "digital" } else { "analog" }
             ),
+            ForceControl { target: Some(n) } => write!(f, "force control on {n:.4} N"),
+            ForceControl { target: None } => write!(f, "force control off"),
             UserMCode { number, p, q } => write!(f, "user M{number} P{p} Q{q}"),
             Comment(text) => write!(f, "comment {text:?}"),
             Message(text) => write!(f, "message {text:?}"),

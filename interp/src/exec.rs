@@ -14,6 +14,11 @@ use crate::interp::{
     WordName, A, C, X, Y, Z,
 };
 
+/// kerf's built-in M-code: cutting-force control on (`M170 P`*newtons*).
+const M_FORCE_ON: i32 = 170;
+/// kerf's built-in M-code: cutting-force control off.
+const M_FORCE_OFF: i32 = 171;
+
 /// Inch per mm, for unit changes.
 const INCH_PER_MM: f64 = 1.0 / 25.4;
 
@@ -723,7 +728,21 @@ impl Interp<'_> {
                 .convert_remapped_code(b, step::M_10, 'm', m10)
                 .map(Some);
         }
-        if m10 != -1 && b.once(step::M_10) {
+        if (m10 == M_FORCE_ON || m10 == M_FORCE_OFF) && b.once(step::M_10) {
+            // kerf's own codes: built in, so no user program is looked up.
+            self.point_m(b, 10);
+            let target = if m10 == M_FORCE_ON {
+                let p = b.get(b'p');
+                chk!(
+                    !p.is_some_and(|p| p.is_finite() && p > 0.0),
+                    "M170 needs P, the target cutting force in newtons, above 0 (e.g. M170 P250)"
+                );
+                p
+            } else {
+                None
+            };
+            self.enqueue(CanonCmd::ForceControl { target });
+        } else if m10 != -1 && b.once(step::M_10) {
             self.point_m(b, 10);
             let file = format!("M{m10}");
             let exists = self.cfg.user_m_path.iter().any(|d| d.join(&file).is_file());

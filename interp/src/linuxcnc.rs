@@ -312,7 +312,9 @@ impl Rs274Formatter {
                 let _ = write!(s, "SET_AUX_OUTPUT_VALUE({index},{value:.6})");
             }
             // rs274 has no machine to wait on or run programs for.
-            WaitInput { .. } | UserMCode { .. } => return,
+            // rs274 has no force control: LinuxCNC would run M170/M171 as
+            // user programs, which print nothing either.
+            WaitInput { .. } | UserMCode { .. } | ForceControl { .. } => return,
             Comment(t) => {
                 let _ = write!(s, "COMMENT(\"{t}\")");
             }

@@ -677,3 +677,38 @@ fn lines_longer_than_linuxcnc_accepts_are_refused() {
     let huge = format!("({})\nM2\n", "a".repeat(5_000_000));
     assert_eq!(error(&huge), "t.ngc:1:1: Command too long");
 }
+
+#[test]
+fn m170_and_m171_switch_force_control_without_a_user_program() {
+    // No USER_M_PATH is configured, so any other M1xx is unknown; kerf's
+    // force-control codes are built in and carry P as the force in N.
+    let cmds = run("M170 P250\nG1 X1 F100\nM171\nM2\n");
+    let force: Vec<_> = cmds
+        .iter()
+        .filter_map(|c| match c {
+            CanonCmd::ForceControl { target } => Some(*target),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(force, [Some(250.0), None]);
+    // On comes before the move, off after it, as written.
+    let first = cmds
+        .iter()
+        .position(|c| matches!(c, CanonCmd::ForceControl { .. }))
+        .unwrap();
+    let feed = cmds
+        .iter()
+        .position(|c| matches!(c, CanonCmd::StraightFeed { .. }))
+        .unwrap();
+    assert!(first < feed);
+    // The force is a P word, positive; anything else names the code, the
+    // file and the line.
+    for bad in ["M170\nM2\n", "M170 P0\nM2\n", "M170 P-5\nM2\n"] {
+        let e = error(bad);
+        assert!(
+            e.contains("t.ngc:1") && e.contains("M170 needs P"),
+            "{bad:?}: {e}"
+        );
+    }
+    assert!(error("M172\nM2\n").contains("Unknown m code used: M172"));
+}

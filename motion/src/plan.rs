@@ -319,6 +319,7 @@ impl<'k> Planner<'k> {
             CanonCmd::SetFeedRate { mm_per_min } => self.feed_word = *mm_per_min,
             CanonCmd::SetFeedMode { per_revolution, .. } => self.per_revolution = *per_revolution,
             CanonCmd::SetSpindleSpeed { rpm, .. } => self.spindle_rpm = *rpm,
+            CanonCmd::ForceControl { target } => self.force_control = *target,
             CanonCmd::SetMotionControlMode(mode) => {
                 self.mode = match *mode {
                     MotionMode::ExactStop => PathMode::ExactStop,
@@ -740,6 +741,9 @@ impl<'k> Planner<'k> {
                 Shape::Blend(Blend::from_control(control)),
             );
             blend.feed = a.segment.feed.min(b_segment.feed);
+            // The blend starts line b, so it carries b's force setting, not
+            // whatever the program has set since.
+            blend.force_control = b_segment.force_control;
             // Equal tangents and curvatures meet at both ends of the blend;
             // a consumed line leaves nothing (or rounding) between blends.
             if a.segment.length > 1e-9 * a.full_length().max(1.0) {
