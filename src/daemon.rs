@@ -157,6 +157,7 @@ impl Daemon {
             command_queue,
         )?;
         tick.configure(&description);
+        tick.set_pins(kerf_io::PinBank::new(&hal_config.pins));
         if let Some(shm) = &hal_config.shm {
             let instance = shm
                 .instance
@@ -212,6 +213,8 @@ impl Daemon {
                 period_us: options.period_us,
                 planner: PlannerConfig {
                     period,
+                    digital_outputs: hal_config.pins.digital_out.len(),
+                    analog_outputs: hal_config.pins.analog_out.len(),
                     ..PlannerConfig::default()
                 },
                 control: Mutex::new(Control::new(joint_names)),

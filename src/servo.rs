@@ -18,12 +18,17 @@ use kerf_io::{Feedback, Hal, HalFault, PinBank, Setpoints};
 use kerf_machines::Description;
 use kerf_motion::control::{JointLoops, LoopGains};
 use kerf_motion::fuzzy::{self, ForceControl};
-use kerf_motion::{Executor, Kinematics, KinematicsError, Segment, SegmentKind, MAX_JOINTS};
+use kerf_motion::{
+    Executor, Kinematics, KinematicsError, OutputChange, Segment, SegmentKind, MAX_ANALOG_OUTPUTS,
+    MAX_DIGITAL_OUTPUTS, MAX_JOINTS,
+};
 
 use crate::latency::{LatencyHistogram, LatencyStats};
 use crate::seqlock::Writer;
 
 const _: () = assert!(MAX_JOINTS == kerf_io::MAX_JOINTS);
+const _: () = assert!(MAX_DIGITAL_OUTPUTS == kerf_io::pins::MAX_DIGITAL);
+const _: () = assert!(MAX_ANALOG_OUTPUTS == kerf_io::pins::MAX_ANALOG);
 
 /// An operator command for the servo thread, sent through a lock-free queue.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -191,7 +196,6 @@ impl Snapshot {
 /// Status and pins published to shared memory every tick.
 struct Export {
     shm: ShmExport,
-    pins: PinBank,
     frame: StatusFrame,
 }
 
@@ -213,6 +217,11 @@ pub struct ServoTick {
     feedback: Feedback,
     snapshot: Snapshot,
     export: Option<Box<Export>>,
+    /// The I/O pins M62–M68 set (none until [`ServoTick::set_pins`]).
+    pins: PinBank,
+    /// The head segment's synchronised outputs have been applied (its
+    /// motion started in an earlier tick).
+    head_outputs_done: bool,
     /// Position loops of the joints (their output drives plants that take
     /// an effort; position drives ignore it).
     loops: JointLoops,
@@ -262,6 +271,8 @@ impl ServoTick {
             feedback,
             snapshot: Snapshot::at_rest(start, &joints[..n]),
             export: None,
+            pins: PinBank::new(&kerf_io::PinConfig::default()),
+            head_outputs_done: false,
             loops: JointLoops::new(&[LoopGains::SEED; MAX_JOINTS][..n], &joints[..n]),
             spindle_rpm: 0.0,
             force: None,
@@ -347,11 +358,28 @@ impl ServoTick {
 
     /// Publish the status and `pins` through `shm` every tick from now on.
     pub fn export_to(&mut self, shm: ShmExport, pins: PinBank) {
+        self.pins = pins;
         self.export = Some(Box::new(Export {
             shm,
-            pins,
             frame: StatusFrame::default(),
         }));
+    }
+
+    /// The machine's I/O pins (from `[hal.pins]`), which the program's
+    /// M62–M68 set.
+    pub fn set_pins(&mut self, pins: PinBank) {
+        self.pins = pins;
+    }
+
+    /// The I/O pins as of the last tick.
+    pub fn pins(&self) -> &PinBank {
+        &self.pins
+    }
+
+    /// Store an input pin's value, as the shared-memory export does (for
+    /// tests and machines without one).
+    pub fn pins_mut(&mut self) -> &mut PinBank {
+        &mut self.pins
     }
 
     /// The servo period in seconds.
@@ -419,6 +447,7 @@ impl ServoTick {
         let snap = &mut self.snapshot;
         while let Ok(seg) = self.queue.pop() {
             snap.consumed += 1;
+            self.head_outputs_done = false;
             if let SegmentKind::Stop { tag } = seg.kind {
                 snap.program_aborted = tag;
                 if self.aborting.is_some_and(|a| a <= tag) {
@@ -522,7 +551,7 @@ impl ServoTick {
             f.feed_override = snap.feed_override * snap.force.map_or(1.0, |c| c.feed_override);
             f.force = force.force;
             f.fault = snap.fault.is_some() as u32;
-            ex.shm.exchange(f, &mut ex.pins);
+            ex.shm.exchange(f, &mut self.pins);
         }
         &self.snapshot
     }
@@ -533,6 +562,7 @@ impl ServoTick {
             // At rest: drop what is queued up to the planner's final marker.
             while let Ok(seg) = self.queue.pop() {
                 snap.consumed += 1;
+                self.head_outputs_done = false;
                 if seg.kind == (SegmentKind::Stop { tag: program }) {
                     self.aborting = None;
                     snap.program_aborted = program;
@@ -567,6 +597,23 @@ impl ServoTick {
                 fc.set_target(seg.force_control);
             }
         }
+        // Outputs, in queue order: what was passed this period (markers,
+        // and motion that started and ended within it), then the segment
+        // now running once the tool has left its start.
+        for (i, seg) in head.iter().chain(tail).take(sample.consumed).enumerate() {
+            if !(i == 0 && self.head_outputs_done) {
+                apply_outputs(&mut self.pins, seg);
+            }
+        }
+        if sample.consumed > 0 {
+            self.head_outputs_done = false;
+        }
+        if let Some(seg) = current.filter(|s| s.is_motion()) {
+            if !self.head_outputs_done && self.executor.progress() > 0.0 {
+                apply_outputs(&mut self.pins, seg);
+                self.head_outputs_done = true;
+            }
+        }
         chunk.commit(sample.consumed);
         snap.consumed += sample.consumed as u64;
         if let Some(tag) = sample.stopped_at {
@@ -586,6 +633,35 @@ impl ServoTick {
             }
             Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
         }
+    }
+}
+
+/// Set the outputs `seg` changes: an immediate output marker's, or the
+/// synchronised ones a motion segment carries. Pin numbers were checked
+/// against the machine when planned, so a bad one is ignored here.
+fn apply_outputs(pins: &mut PinBank, seg: &Segment) {
+    match seg.kind {
+        SegmentKind::Output(OutputChange::Digital { index, on }) => {
+            let _ = pins.set_digital(index as usize, on);
+        }
+        SegmentKind::Output(OutputChange::Analog { index, value }) => {
+            let _ = pins.set_analog(index as usize, value);
+        }
+        _ if seg.is_motion() && !seg.outputs.is_empty() => {
+            let out = &seg.outputs;
+            for n in 0..MAX_DIGITAL_OUTPUTS {
+                if out.digital_mask >> n & 1 == 1 {
+                    let _ = pins.set_digital_synced(n, out.digital_bits >> n & 1 == 1);
+                }
+            }
+            for n in 0..MAX_ANALOG_OUTPUTS {
+                if out.analog_mask >> n & 1 == 1 {
+                    let _ = pins.set_analog_synced(n, out.analog[n]);
+                }
+            }
+            pins.motion_started();
+        }
+        _ => {}
     }
 }
 

@@ -210,3 +210,45 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
     let ratio = json["max_limit_ratio"].as_f64().unwrap();
     assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
 }
+
+#[test]
+fn offline_tools_take_programs_that_set_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(
+        &dir,
+        "pins.ngc",
+        "G21 G90 G1 X10 F600\nM62 P0\nM67 E0 Q2\nG1 X20\nM64 P1\nM68 E1 Q1\nG1 X30\nM65 P1\nM63 P0\nM2\n",
+    );
+    for tool in ["check", "plan", "sim"] {
+        let out = kerf(&[tool, &p]);
+        assert!(
+            out.status.success(),
+            "kerf {tool}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    // M64, M68 and M65 are markers where the tool rests; M62 and M67 ride
+    // on the move after them (M63 has none, so it never acts).
+    let out = kerf(&["plan", "--segments", &p]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    let kinds: Vec<(&str, &str)> = text
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            Some((w.next()?, w.next()?))
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("1", "line"),
+            ("4", "line"),
+            ("5", "output"),
+            ("6", "output"),
+            ("7", "line"),
+            ("8", "output"),
+        ],
+        "{text}"
+    );
+}

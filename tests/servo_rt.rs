@@ -52,7 +52,9 @@ fn ticks_through_a_program_without_allocating() {
     let (mut producer, consumer) = rtrb::RingBuffer::new(256);
     let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
 
-    let program = "G21 G90 G0 X50 Y40 Z-10\nG1 X80 F900\nY60\nX70 Y70\nG4 P0.05\nG20 G91 G1 Y1 Z-0.1\nG0 X-1\nM2\n";
+    // With outputs on the way: synchronised ones riding on moves (M62,
+    // M67) and immediate ones as queue markers (M64, M65, M68).
+    let program = "G21 G90 G0 X50 Y40 Z-10\nM62 P0\nM67 E0 Q1.5\nG1 X80 F900\nY60\nM64 P1\nX70 Y70\nG4 P0.05\nM68 E1 Q2\nG20 G91 G1 Y1 Z-0.1\nM63 P0\nM65 P1\nG0 X-1\nM2\n";
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
     for canon in Interpreter::from_text(program, "rt.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();
@@ -72,6 +74,7 @@ fn ticks_through_a_program_without_allocating() {
     let mut tick =
         ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
     tick.set_following_error_limits(&[Some(0.1), Some(0.1), None]);
+    tick.set_pins(kerf_io::PinBank::new(&hal_config.pins));
     commands.push(ServoCommand::Enable(true)).unwrap();
     COUNTING.with(|c| c.set(true));
     let mut ticks = 0u64;
@@ -105,6 +108,9 @@ fn ticks_through_a_program_without_allocating() {
     assert!(snap.fault.is_none());
     assert_eq!(snap.position, expected_end);
     assert!(ticks > 1000, "ran {ticks} ticks: too few to mean anything");
+    let pins = tick.pins();
+    assert_eq!(pins.digital_outputs(), 0, "M63 and M65 turned both off");
+    assert_eq!((pins.analog_out(0), pins.analog_out(1)), (1.5, 2.0));
 }
 
 /// Every embedded machine's inverse and forward kinematics, called as the

@@ -317,6 +317,12 @@ impl Executor {
         self.position
     }
 
+    /// Distance travelled into the head segment, mm: above zero once its
+    /// motion has started, which is when its synchronised outputs act.
+    pub fn progress(&self) -> f64 {
+        self.s
+    }
+
     /// Path speed after the last tick, mm/s.
     pub fn velocity(&self) -> f64 {
         self.v
@@ -405,7 +411,7 @@ impl Executor {
                 .max_velocity
                 .min(seg.feed * self.feed_override * self.feed_scale),
             SegmentKind::Rapid => seg.max_velocity * self.rapid_override,
-            SegmentKind::Dwell { .. } | SegmentKind::Stop { .. } => 0.0,
+            SegmentKind::Dwell { .. } | SegmentKind::Stop { .. } | SegmentKind::Output(_) => 0.0,
         }
     }
 
@@ -573,6 +579,14 @@ impl Executor {
                     stopped_at = Some(tag);
                     self.line = seg.line;
                     self.s = 0.0;
+                    break;
+                }
+                SegmentKind::Output(_) => {
+                    // The caller sets the output this period; the move
+                    // after it starts in the next, so the change comes
+                    // first, as the program's order says.
+                    consumed += 1;
+                    self.line = seg.line;
                     break;
                 }
                 SegmentKind::Dwell { seconds } => {

@@ -27,6 +27,56 @@ pub enum SegmentKind {
     Dwell { seconds: f64 },
     /// Come to rest here and report `tag` (program end, end of an MDI block).
     Stop { tag: u32 },
+    /// M64/M65/M68: set an output when the queue reaches this point, at
+    /// rest. LinuxCNC's task also waits for motion to finish before an
+    /// immediate output, so the change lands in program order.
+    Output(OutputChange),
+}
+
+/// One output change of M64/M65 (digital) or M68 (analog).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OutputChange {
+    /// Digital output `index` on or off.
+    Digital { index: u8, on: bool },
+    /// Analog output `index` to `value`.
+    Analog { index: u8, value: f64 },
+}
+
+/// Most digital outputs a segment can change (bits of a `u64`).
+pub const MAX_DIGITAL_OUTPUTS: usize = 64;
+/// Most analog outputs a segment can change.
+pub const MAX_ANALOG_OUTPUTS: usize = 16;
+
+/// M62/M63/M67 changes that ride on a motion segment and take effect in
+/// the servo period its motion starts. A fixed-size value, so segments stay
+/// `Copy` and the servo applies it without allocating.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SyncOutputs {
+    /// Digital outputs to change: bit `n` = output `n`.
+    pub digital_mask: u64,
+    /// Their new values, under `digital_mask`.
+    pub digital_bits: u64,
+    /// Analog outputs to change: bit `n` = output `n`.
+    pub analog_mask: u16,
+    /// Their new values, under `analog_mask`.
+    pub analog: [f64; MAX_ANALOG_OUTPUTS],
+}
+
+impl SyncOutputs {
+    /// Nothing to change.
+    pub fn is_empty(&self) -> bool {
+        self.digital_mask == 0 && self.analog_mask == 0
+    }
+
+    fn set_digital(&mut self, index: usize, on: bool) {
+        self.digital_mask |= 1 << index;
+        self.digital_bits = (self.digital_bits & !(1 << index)) | ((on as u64) << index);
+    }
+
+    fn set_analog(&mut self, index: usize, value: f64) {
+        self.analog_mask |= 1 << index;
+        self.analog[index] = value;
+    }
 }
 
 /// A planned piece of motion. `Copy` and allocation-free, so the servo
@@ -53,6 +103,9 @@ pub struct Segment {
     /// ([`Planner::set_force_control`]): the target force, N, or `None`
     /// for off. The servo applies a change when the segment starts.
     pub force_control: Option<f64>,
+    /// Outputs that change as this segment's motion starts (M62/M63/M67
+    /// programmed before it).
+    pub outputs: SyncOutputs,
 }
 
 impl Segment {
@@ -70,6 +123,7 @@ impl Segment {
             max_jerk: f64::INFINITY,
             exit_velocity: 0.0,
             force_control: None,
+            outputs: SyncOutputs::default(),
         }
     }
 
@@ -133,6 +187,10 @@ pub struct PlannerConfig {
     pub centripetal_share: f64,
     /// Path tolerance for G64 without P, mm (LinuxCNC: unlimited).
     pub default_tolerance: f64,
+    /// Digital outputs the machine has (M62–M65 P must be below).
+    pub digital_outputs: usize,
+    /// Analog outputs the machine has (M67/M68 E must be below).
+    pub analog_outputs: usize,
 }
 
 impl Default for PlannerConfig {
@@ -143,6 +201,8 @@ impl Default for PlannerConfig {
             jerk_limited: true,
             centripetal_share: 0.5,
             default_tolerance: 0.01,
+            digital_outputs: MAX_DIGITAL_OUTPUTS,
+            analog_outputs: MAX_ANALOG_OUTPUTS,
         }
     }
 }
@@ -186,6 +246,8 @@ pub struct Planner<'k> {
     spindle_rpm: f64,
     /// Programmed cutting-force control: target force, N.
     force_control: Option<f64>,
+    /// M62/M63/M67 waiting for the next motion segment.
+    sync_outputs: SyncOutputs,
     position: Position,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
@@ -268,6 +330,7 @@ impl<'k> Planner<'k> {
             per_revolution: false,
             spindle_rpm: 0.0,
             force_control: None,
+            sync_outputs: SyncOutputs::default(),
             position: start,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
@@ -371,6 +434,31 @@ impl<'k> Planner<'k> {
                 return unsupported("spindle-synchronised motion (G33, G76)")
             }
             CanonCmd::WaitInput { .. } => return unsupported("waiting on an input (M66)"),
+            CanonCmd::SetMotionOutputBit { index } => {
+                let n = self.digital_output(canon, *index)?;
+                self.sync_outputs.set_digital(n, true);
+            }
+            CanonCmd::ClearMotionOutputBit { index } => {
+                let n = self.digital_output(canon, *index)?;
+                self.sync_outputs.set_digital(n, false);
+            }
+            CanonCmd::SetMotionOutputValue { index, value } => {
+                let n = self.analog_output(canon, *index)?;
+                self.sync_outputs.set_analog(n, *value);
+            }
+            CanonCmd::SetAuxOutputBit { index } | CanonCmd::ClearAuxOutputBit { index } => {
+                let n = self.digital_output(canon, *index)?;
+                let on = matches!(canon.cmd, CanonCmd::SetAuxOutputBit { .. });
+                self.output_marker(line, OutputChange::Digital { index: n as u8, on });
+            }
+            CanonCmd::SetAuxOutputValue { index, value } => {
+                let n = self.analog_output(canon, *index)?;
+                let change = OutputChange::Analog {
+                    index: n as u8,
+                    value: *value,
+                };
+                self.output_marker(line, change);
+            }
             // Offsets and modes the interpreter has already applied to every
             // position, and commands for other parts of the machine.
             CanonCmd::UseLengthUnits(_)
@@ -407,12 +495,6 @@ impl<'k> Planner<'k> {
             | CanonCmd::DisableAdaptiveFeed
             | CanonCmd::EnableFeedHold
             | CanonCmd::DisableFeedHold
-            | CanonCmd::SetMotionOutputBit { .. }
-            | CanonCmd::ClearMotionOutputBit { .. }
-            | CanonCmd::SetMotionOutputValue { .. }
-            | CanonCmd::SetAuxOutputBit { .. }
-            | CanonCmd::ClearAuxOutputBit { .. }
-            | CanonCmd::SetAuxOutputValue { .. }
             | CanonCmd::UserMCode { .. }
             | CanonCmd::Log(_)
             | CanonCmd::LogOpen(_)
@@ -421,6 +503,45 @@ impl<'k> Planner<'k> {
             | CanonCmd::Print(_) => {}
         }
         Ok(())
+    }
+
+    /// `P` of M62–M65 as a digital output number of this machine.
+    fn digital_output(&self, canon: &Canon, index: u32) -> Result<usize, PlanError> {
+        let count = self.config.digital_outputs.min(MAX_DIGITAL_OUTPUTS);
+        match index as usize {
+            n if n < count => Ok(n),
+            n => Err(self.error(
+                canon,
+                format!("no digital output {n}: the machine has {count} ([hal.pins] digital_out)"),
+            )),
+        }
+    }
+
+    /// `E` of M67/M68 as an analog output number of this machine.
+    fn analog_output(&self, canon: &Canon, index: u32) -> Result<usize, PlanError> {
+        let count = self.config.analog_outputs.min(MAX_ANALOG_OUTPUTS);
+        match index as usize {
+            n if n < count => Ok(n),
+            n => Err(self.error(
+                canon,
+                format!("no analog output {n}: the machine has {count} ([hal.pins] analog_out)"),
+            )),
+        }
+    }
+
+    /// An immediate output: everything before it runs to rest first.
+    fn output_marker(&mut self, line: u32, change: OutputChange) {
+        self.finish();
+        self.ready.push_back(Segment::marker(
+            SegmentKind::Output(change),
+            line,
+            self.position,
+        ));
+    }
+
+    /// Hand the waiting M62/M63/M67 changes to the move about to be queued.
+    fn take_sync_outputs(&mut self) -> SyncOutputs {
+        std::mem::take(&mut self.sync_outputs)
     }
 
     /// The programmed path speed for feed moves, mm/s: the F word, or F
@@ -509,7 +630,8 @@ impl<'k> Planner<'k> {
             };
             return Err(self.error(canon, why.into()));
         }
-        let segment = self.segment(kind, canon.source.line, shape);
+        let mut segment = self.segment(kind, canon.source.line, shape);
+        segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
             programmed: Some(line),
@@ -530,7 +652,8 @@ impl<'k> Planner<'k> {
         if self.feed() <= 0.0 {
             return Err(self.error(canon, "arc with a zero feed rate".into()));
         }
-        let segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
+        let mut segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
+        segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
             programmed: None,
@@ -729,6 +852,8 @@ impl<'k> Planner<'k> {
             b.start_leg = legs.1;
             b.mid_curvature = k1;
             let b_segment = b.segment;
+            // Line b's motion now starts with the blend.
+            b.segment.outputs = SyncOutputs::default();
             let kind =
                 if a.segment.kind == SegmentKind::Rapid && b_segment.kind == SegmentKind::Rapid {
                     SegmentKind::Rapid
@@ -744,6 +869,7 @@ impl<'k> Planner<'k> {
             // The blend starts line b, so it carries b's force setting, not
             // whatever the program has set since.
             blend.force_control = b_segment.force_control;
+            blend.outputs = b_segment.outputs;
             // Equal tangents and curvatures meet at both ends of the blend;
             // a consumed line leaves nothing (or rounding) between blends.
             if a.segment.length > 1e-9 * a.full_length().max(1.0) {
@@ -801,6 +927,7 @@ impl<'k> Planner<'k> {
             max_jerk: j,
             exit_velocity: 0.0,
             force_control: self.force_control,
+            outputs: SyncOutputs::default(),
         }
     }
 

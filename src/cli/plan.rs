@@ -86,6 +86,7 @@ pub fn segments(file: &Path, machine: &str) -> Result<(), Failure> {
         };
         let kind = match (seg.kind, seg.shape) {
             (kerf_motion::SegmentKind::Dwell { .. }, _) => "dwell",
+            (kerf_motion::SegmentKind::Output(_), _) => "output",
             (_, kerf_motion::path::Shape::Blend(_)) => "blend",
             (_, kerf_motion::path::Shape::Arc(_)) => "arc",
             (kerf_motion::SegmentKind::Rapid, _) => "rapid",
