@@ -15,7 +15,10 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use kerf_interp::{Axis, Canon, CanonCmd, Interpreter, Position, Source};
+use kerf_interp::{
+    Axis, Canon, CanonCmd, Config, Environment, Interpreter, Offline, Position, ProbeKind,
+    ProbeOutcome, Source,
+};
 use kerf_machines::Machine;
 use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment, SegmentKind};
 use serde_json::{json, Map, Value};
@@ -30,7 +33,7 @@ use crate::protocol::{
 };
 use crate::seqlock::{seqlock, Reader};
 use crate::servo::{self, Pacing, RealTime, ServoCommand, ServoThread, ServoTick, Snapshot};
-use crate::state::{Parameters, Store, Tool, COORDINATE_SYSTEMS};
+use crate::state::{tools_to_text, Parameters, Store, Tool, COORDINATE_SYSTEMS};
 
 /// Segments the planner may run ahead of the servo: the executor looks
 /// ahead over all of them (at least 2000 segments, and 0.5 s of motion even
@@ -99,6 +102,10 @@ struct Shared {
     realtime: servo::RealTimeReport,
     /// The machine's `[force_control]` target, if it has the table.
     force_control: Option<Option<f64>>,
+    /// The modal state the last MDI line left (as G-code lines that set it
+    /// up), carried to the next MDI line; a program run or a reset drops
+    /// it, as LinuxCNC's interpreter starts afresh then.
+    mdi_modal: Mutex<Option<[String; 2]>>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -229,6 +236,7 @@ impl Daemon {
                 memory_locked,
                 realtime,
                 force_control: description.force_control.map(|f| f.target),
+                mdi_modal: Mutex::new(None),
             }),
             servo,
         })
@@ -818,6 +826,7 @@ async fn handle(
                     }
                     Err(e) => return Err(e),
                     Ok(was_fault) => {
+                        *shared.mdi_modal.lock().expect("MDI lock poisoned") = None;
                         if was_fault {
                             shared.send(ServoCommand::ClearFault)?;
                         }
@@ -1120,6 +1129,7 @@ async fn run(
     if from_line == 0 {
         return Err(invalid("lines count from 1"));
     }
+    *shared.mdi_modal.lock().expect("MDI lock poisoned") = None;
     let start = shared.status.read().commanded;
     let lines = check_file(shared, &path, start, from_line).await?;
     let program = Program::ready(path.clone(), lines, from_line);
@@ -1144,11 +1154,19 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
     }
     shared.observe().check_motion("run MDI", true)?;
     let start = shared.status.read().commanded;
-    // The interpreter wants a program end; MDI lines are single blocks.
-    let text = format!("{line}\nM2\n");
-    let canons: Vec<Canon> = Interpreter::from_text(text, "MDI", start)
-        .collect::<Result<_, _>>()
-        .map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+    // One MDI session is one interpreter's state: the last line's modal
+    // state is set up first, and `%` (not M2, which resets the modes and
+    // the coordinate system) ends the text.
+    let modal = shared.mdi_modal.lock().expect("MDI lock poisoned").clone();
+    let preamble: Vec<String> = modal.map(Vec::from).unwrap_or_default();
+    let shift = 1 + preamble.len() as u32;
+    let mut text = String::from("%\n");
+    for l in &preamble {
+        text.push_str(l);
+        text.push('\n');
+    }
+    text.push_str(&format!("{line}\n%\n"));
+    let (canons, modal) = interpret_mdi(shared, text, shift, start)?;
     check_canons(shared, &canons, start)?;
     let id = start_job(
         shared,
@@ -1161,7 +1179,94 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
         false,
     )
     .await?;
+    *shared.mdi_modal.lock().expect("MDI lock poisoned") = Some(modal);
     Ok(json!({"mdi": id}))
+}
+
+/// Interpret MDI `text` whose first `shift` lines are the `%` and the
+/// modal preamble; returns its canon and the modal state it leaves. Apart
+/// from `mdi` because the interpreter is not `Send` and so cannot live in
+/// an async function across an await.
+fn interpret_mdi(
+    shared: &Arc<Shared>,
+    text: String,
+    shift: u32,
+    start: Position,
+) -> Result<(Vec<Canon>, [String; 2]), Refusal> {
+    let mut interp = Interpreter::with_source(
+        Box::new(std::io::Cursor::new(text.into_bytes())),
+        "MDI",
+        None,
+        interp_config(shared, start),
+        Box::new(SaveToStore(shared.clone())),
+    );
+    let mut canons = Vec::new();
+    for c in interp.by_ref() {
+        // Lines are counted as the operator sees them: the preamble is line
+        // 1 too, then the MDI line.
+        match c {
+            Ok(mut c) => {
+                c.source.line = c.source.line.saturating_sub(shift).max(1);
+                canons.push(c);
+            }
+            Err(mut e) => {
+                e.line = e.line.saturating_sub(shift).max(1);
+                return Err((ErrorCode::ProgramError, e.to_string()));
+            }
+        }
+    }
+    Ok((canons, interp.modal_gcode()))
+}
+
+/// The interpreter set-up of a run or MDI: it starts from the daemon's
+/// stored parameters (work offsets, G92, G28/G30 positions, active
+/// coordinate system) and tool table, at the machine's position.
+fn interp_config(shared: &Shared, start: Position) -> Config {
+    let store = shared.store.lock().expect("store lock poisoned");
+    let parameters = store
+        .parameters()
+        .to_numbered()
+        .into_iter()
+        .map(|(n, v)| (n as usize, v))
+        .collect();
+    // The store's tool table was validated when it was read or set, so a
+    // line the interpreter's reader skips here cannot occur.
+    let (tool_table, _) =
+        kerf_interp::ToolTable::parse_lenient(&tools_to_text(store.tools()), false);
+    Config {
+        tool_table,
+        parameters,
+        start_position: start,
+        ..Config::default()
+    }
+}
+
+/// The environment of programs and MDI the machine runs: the parameters a
+/// program leaves (G10 L2, G92, G28.1 …) go to the same parameter file the
+/// `offsets` commands use, written atomically, so `offsets` shows them and
+/// a restart keeps them. The interpreter saves when its program ends, which
+/// is when it has read the program, a little ahead of the motion.
+struct SaveToStore(Arc<Shared>);
+
+impl Environment for SaveToStore {
+    fn probe(&mut self, start: Position, end: Position, kind: ProbeKind) -> ProbeOutcome {
+        // The simulated machine has no probe input: the offline model
+        // (no trip at the programmed end) is what the check planned too.
+        Offline::default().probe(start, end, kind)
+    }
+
+    fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
+        let numbered = (5161..=5390u32)
+            .filter_map(|n| values.get(n as usize).map(|v| (n, *v)))
+            .collect();
+        let p = Parameters::from_numbered(&numbered)?;
+        let mut store = self.0.store.lock().expect("store lock poisoned");
+        if *store.parameters() != p {
+            // The error names the file and why.
+            store.set_parameters(p).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
 }
 
 /// A canon command of a job kerfd makes itself (jog, homing): line 1 of
@@ -1475,6 +1580,7 @@ async fn check_file(
 ) -> Result<u32, Refusal> {
     let kins = shared.kins.clone();
     let config = shared.planner;
+    let config_for_check = interp_config(shared, start);
     let path = path.to_path_buf();
     blocking(move || {
         let io_err = |e: std::io::Error| {
@@ -1483,7 +1589,10 @@ async fn check_file(
                 format!("cannot read {}: {e}", path.display()),
             )
         };
-        let interp = Interpreter::open(&path, start).map_err(io_err)?;
+        // A check only: what the program would leave in the parameters is
+        // kept when it really runs.
+        let interp = Interpreter::open_with(&path, config_for_check, Box::new(Offline::default()))
+            .map_err(io_err)?;
         let mut planner = Planner::new(&*kins, start, config);
         for canon in interp {
             let canon = canon.map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
@@ -1536,7 +1645,11 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
     let mut planner = Planner::new(&*shared.kins, start, config);
     let canons: Box<dyn Iterator<Item = Result<Canon, String>>> = match source {
         JobSource::Canons(c) => Box::new(c.into_iter().map(Ok)),
-        JobSource::File(path) => match Interpreter::open(&path, start) {
+        JobSource::File(path) => match Interpreter::open_with(
+            &path,
+            interp_config(&shared, start),
+            Box::new(SaveToStore(shared.clone())),
+        ) {
             Ok(i) => Box::new(i.map(|r| r.map_err(|e| e.to_string()))),
             Err(e) => {
                 failure = Some(format!("cannot read {}: {e}", path.display()));

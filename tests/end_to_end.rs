@@ -972,3 +972,90 @@ fn the_cli_drives_the_machine_and_prints_for_people_and_scripts() {
     watch.kill().unwrap();
     watch.wait().unwrap();
 }
+
+fn mdi_to_end(c: &mut Client, line: &str) -> Status {
+    let id = c
+        .request(&Command::Mdi { line: line.into() })
+        .unwrap_or_else(|e| panic!("mdi {line:?}: {e}"))["mdi"]
+        .as_u64()
+        .unwrap() as u32;
+    c.wait_job(id, 100.0, |_| {}).unwrap()
+}
+
+#[test]
+fn work_offsets_move_mdi_and_programs_and_their_changes_persist() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let mut values = serde_json::Map::new();
+    values.insert("x".into(), serde_json::json!(7.5));
+    c.request(&Command::SetOffset {
+        system: "G54".into(),
+        values,
+    })
+    .unwrap();
+    let end = mdi_to_end(&mut c, "G54 G0 X10");
+    assert_eq!(axis(&end, "x"), 17.5, "X10 in G54 is machine X 10 + 7.5");
+
+    mdi_to_end(&mut c, "G10 L2 P1 X5");
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G54"]["x"], 5.0, "{offsets}");
+    let end = mdi_to_end(&mut c, "G0 X1");
+    assert_eq!(axis(&end, "x"), 6.0, "the new offset applies at once");
+
+    // A program's G10 L2 and G28.1 come back too.
+    let program = kerfd.program("g10.ngc", "G10 L2 P2 Y-3\nG0 X2\nG28.1\nM2\n");
+    let end = run_to_end(&mut c, &program);
+    assert_eq!(axis(&end, "x"), 7.0);
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G55"]["y"], -3.0, "{offsets}");
+    assert_eq!(offsets["g28"]["x"], 7.0, "{offsets}");
+
+    let dir = kerfd.dir.clone();
+    drop(c);
+    drop(kerfd);
+    let kerfd = Kerfd::start_in(dir, &[], &[]);
+    let mut c = kerfd.ready_client();
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G54"]["x"], 5.0, "{offsets}");
+    assert_eq!(offsets["systems"]["G55"]["y"], -3.0, "{offsets}");
+    let end = mdi_to_end(&mut c, "G0 X0");
+    assert_eq!(
+        axis(&end, "x"),
+        5.0,
+        "the kept offset applies after a restart"
+    );
+}
+
+#[test]
+fn mdi_keeps_the_modal_state_until_a_run_or_reset() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let x0 = axis(&status(&mut c), "x");
+    mdi_to_end(&mut c, "G91");
+    mdi_to_end(&mut c, "G0 X1");
+    let end = mdi_to_end(&mut c, "G0 X1");
+    assert_eq!(axis(&end, "x"), x0 + 2.0, "G91 held for both moves");
+
+    // Units, the feed rate, G1 and the coordinate system carry over too.
+    let mut values = serde_json::Map::new();
+    values.insert("y".into(), serde_json::json!(2.0));
+    c.request(&Command::SetOffset {
+        system: "G55".into(),
+        values,
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "G90 G20 G55");
+    mdi_to_end(&mut c, "G1 F100 X0.5");
+    let end = mdi_to_end(&mut c, "Y1");
+    assert!((axis(&end, "x") - 12.7).abs() < 1e-9, "{end:?}");
+    assert!((axis(&end, "y") - 27.4).abs() < 1e-9, "{end:?}");
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["active"], "G55", "{offsets}");
+
+    // A reset starts afresh (mm, absolute); the coordinate system is a
+    // parameter and stays, as in LinuxCNC.
+    c.request(&Command::Estop).unwrap();
+    support::ready(&mut c);
+    let end = mdi_to_end(&mut c, "G0 X3");
+    assert_eq!(axis(&end, "x"), 3.0);
+}
