@@ -479,6 +479,7 @@ impl Shared {
             overrides: Overrides {
                 feed: snap.feed_override * 100.0,
                 rapid: snap.rapid_override * 100.0,
+                spindle: snap.spindle_override * 100.0,
             },
             job: control.job_status().cloned(),
             program,
@@ -899,11 +900,20 @@ async fn handle(
             shared.send(ServoCommand::Abort { program: tag })?;
             Ok(json!({"aborted": tag}))
         }
-        Command::Override { feed, rapid } => {
-            if feed.is_none() && rapid.is_none() {
+        Command::Override {
+            feed,
+            rapid,
+            spindle,
+        } => {
+            if feed.is_none() && rapid.is_none() && spindle.is_none() {
                 return Err(invalid(
-                    "give `feed` (0–200) and/or `rapid` (0–100), percent",
+                    "give `feed` (0–200), `rapid` (0–100) and/or `spindle` (0–200), percent",
                 ));
+            }
+            if let Some(s) = spindle.filter(|s| !(0.0..=200.0).contains(s)) {
+                return Err(invalid(format!(
+                    "spindle override {s} % is out of range 0 to 200"
+                )));
             }
             if let Some(f) = feed.filter(|f| !(0.0..=200.0).contains(f)) {
                 return Err(invalid(format!(
@@ -921,7 +931,10 @@ async fn handle(
             if let Some(r) = rapid {
                 shared.send(ServoCommand::RapidOverride(r / 100.0))?;
             }
-            Ok(json!({"feed": feed, "rapid": rapid}))
+            if let Some(s) = spindle {
+                shared.send(ServoCommand::SpindleOverride(s / 100.0))?;
+            }
+            Ok(json!({"feed": feed, "rapid": rapid, "spindle": spindle}))
         }
         Command::Offsets => {
             let store = shared.store.lock().expect("store lock poisoned");

@@ -545,7 +545,12 @@ fn overrides_scale_the_feed_and_the_rapids() {
     let kerfd = Kerfd::start(&[]);
     let mut c = kerfd.ready_client();
     let set = |c: &mut Client, feed: Option<f64>, rapid: Option<f64>| {
-        c.request(&Command::Override { feed, rapid }).unwrap();
+        c.request(&Command::Override {
+            feed,
+            rapid,
+            spindle: None,
+        })
+        .unwrap();
     };
     // Out of range on purpose, so not through the schema-checking client.
     let mut raw = Client::connect(&kerfd.socket).unwrap();
@@ -553,7 +558,8 @@ fn overrides_scale_the_feed_and_the_rapids() {
         code_of(
             raw.request(&Command::Override {
                 feed: Some(250.0),
-                rapid: None
+                rapid: None,
+                spindle: None,
             })
             .unwrap_err()
         )
@@ -784,6 +790,7 @@ fn every_command_and_event_matches_the_schema() {
     c.request(&Command::Override {
         feed: Some(100.0),
         rapid: None,
+        spindle: Some(80.0),
     })
     .unwrap();
     let id = c
@@ -1058,4 +1065,58 @@ fn mdi_keeps_the_modal_state_until_a_run_or_reset() {
     support::ready(&mut c);
     let end = mdi_to_end(&mut c, "G0 X3");
     assert_eq!(axis(&end, "x"), 3.0);
+}
+
+#[test]
+fn the_spindle_override_is_set_shown_and_checked() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    assert_eq!(status(&mut c).overrides.spindle, 100.0);
+    let reply = c
+        .request(&Command::Override {
+            feed: None,
+            rapid: None,
+            spindle: Some(80.0),
+        })
+        .unwrap();
+    assert_eq!(reply["spindle"], 80.0);
+    let seen = loop {
+        let s = status(&mut c);
+        if s.overrides.spindle != 100.0 {
+            break s;
+        }
+    };
+    assert_eq!(seen.overrides.spindle, 80.0);
+    assert_eq!(seen.overrides.feed, 100.0, "the feed override is untouched");
+    // Out of range on purpose, so not through the schema-checking client.
+    let mut raw = Client::connect(&kerfd.socket).unwrap();
+    let (code, msg) = code_of(
+        raw.request(&Command::Override {
+            feed: None,
+            rapid: None,
+            spindle: Some(201.0),
+        })
+        .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(msg.contains("spindle override 201"), "{msg}");
+
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args([
+            "--socket",
+            kerfd.socket.to_str().unwrap(),
+            "override",
+            "spindle",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let seen = loop {
+        let s = status(&mut c);
+        if s.overrides.spindle != 80.0 {
+            break s;
+        }
+    };
+    assert_eq!(seen.overrides.spindle, 50.0);
 }
