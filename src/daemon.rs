@@ -1179,8 +1179,17 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
         text.push('\n');
     }
     text.push_str(&format!("{line}\n%\n"));
-    let (canons, modal) = interpret_mdi(shared, text, shift, start)?;
+    let MdiLine {
+        canons,
+        modal,
+        parameters,
+    } = interpret_mdi(shared, text, shift, start)?;
     check_canons(shared, &canons, start)?;
+    if let Some(p) = parameters {
+        // Before it moves: a line whose changes cannot be kept is refused.
+        let shared2 = shared.clone();
+        blocking(move || save_parameters(&shared2, p)).await?;
+    }
     let id = start_job(
         shared,
         "run MDI",
@@ -1205,13 +1214,14 @@ fn interpret_mdi(
     text: String,
     shift: u32,
     start: Position,
-) -> Result<(Vec<Canon>, [String; 2]), Refusal> {
+) -> Result<MdiLine, Refusal> {
+    let held = Arc::new(Mutex::new(None));
     let mut interp = Interpreter::with_source(
         Box::new(std::io::Cursor::new(text.into_bytes())),
         "MDI",
         None,
         interp_config(shared, start),
-        Box::new(SaveToStore(shared.clone())),
+        Box::new(HoldParameters(held.clone())),
     );
     let mut canons = Vec::new();
     for c in interp.by_ref() {
@@ -1228,7 +1238,28 @@ fn interpret_mdi(
             }
         }
     }
-    Ok((canons, interp.modal_gcode()))
+    let modal = interp.modal_gcode();
+    drop(interp);
+    let parameters = held
+        .lock()
+        .expect("MDI parameters lock poisoned")
+        .take()
+        .transpose()
+        .map_err(|e| (ErrorCode::ProgramError, format!("MDI: {e}")))?;
+    Ok(MdiLine {
+        canons,
+        modal,
+        parameters,
+    })
+}
+
+/// An interpreted MDI line.
+struct MdiLine {
+    canons: Vec<Canon>,
+    /// G-code that sets up the modes the line leaves.
+    modal: [String; 2],
+    /// The parameters it leaves (none if the interpreter saved none).
+    parameters: Option<Parameters>,
 }
 
 /// The interpreter set-up of a run or MDI: it starts from the daemon's
@@ -1269,15 +1300,38 @@ impl Environment for SaveToStore {
     }
 
     fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
-        let numbered = (5161..=5390u32)
-            .filter_map(|n| values.get(n as usize).map(|v| (n, *v)))
-            .collect();
-        let p = Parameters::from_numbered(&numbered)?;
-        let mut store = self.0.store.lock().expect("store lock poisoned");
-        if *store.parameters() != p {
-            // The error names the file and why.
-            store.set_parameters(p).map_err(|e| e.to_string())?;
-        }
+        save_parameters(&self.0, stored_parameters(values)?).map_err(|(_, e)| e)
+    }
+}
+
+/// The persistent parameters among all of an interpreter's, by number.
+fn stored_parameters(values: &[f64]) -> Result<Parameters, String> {
+    let numbered = (5161..=5390u32)
+        .filter_map(|n| values.get(n as usize).map(|v| (n, *v)))
+        .collect();
+    Parameters::from_numbered(&numbered)
+}
+
+/// Write `p` to the parameter file if it differs from what is stored.
+fn save_parameters(shared: &Shared, p: Parameters) -> Result<(), Refusal> {
+    let mut store = shared.store.lock().expect("store lock poisoned");
+    if *store.parameters() != p {
+        store.set_parameters(p).map_err(io_refusal)?;
+    }
+    Ok(())
+}
+
+/// The environment of MDI lines: the parameters the line leaves are held
+/// until the line has passed its check, so a refused line changes nothing.
+struct HoldParameters(Arc<Mutex<Option<Result<Parameters, String>>>>);
+
+impl Environment for HoldParameters {
+    fn probe(&mut self, start: Position, end: Position, kind: ProbeKind) -> ProbeOutcome {
+        Offline::default().probe(start, end, kind)
+    }
+
+    fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
+        *self.0.lock().expect("MDI parameters lock poisoned") = Some(stored_parameters(values));
         Ok(())
     }
 }

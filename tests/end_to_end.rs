@@ -1008,6 +1008,14 @@ fn work_offsets_move_mdi_and_programs_and_their_changes_persist() {
     assert_eq!(offsets["systems"]["G54"]["x"], 5.0, "{offsets}");
     let end = mdi_to_end(&mut c, "G0 X1");
     assert_eq!(axis(&end, "x"), 6.0, "the new offset applies at once");
+    // A refused line (Z5 is beyond the travel) changes no parameter.
+    assert!(c
+        .request(&Command::Mdi {
+            line: "G55 G0 Z5".into()
+        })
+        .is_err());
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["active"], "G54", "{offsets}");
 
     // A program's G10 L2 and G28.1 come back too.
     let program = kerfd.program("g10.ngc", "G10 L2 P2 Y-3\nG0 X2\nG28.1\nM2\n");
