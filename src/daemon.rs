@@ -1185,10 +1185,23 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
         parameters,
     } = interpret_mdi(shared, text, shift, start)?;
     check_canons(shared, &canons, start)?;
-    if let Some(p) = parameters {
+    let tool_entries: Vec<_> = canons
+        .iter()
+        .filter_map(|c| match &c.cmd {
+            CanonCmd::SetToolTableEntry { data, .. } => Some(*data),
+            _ => None,
+        })
+        .collect();
+    if parameters.is_some() || !tool_entries.is_empty() {
         // Before it moves: a line whose changes cannot be kept is refused.
         let shared2 = shared.clone();
-        blocking(move || save_parameters(&shared2, p)).await?;
+        blocking(move || {
+            for data in &tool_entries {
+                keep_tool_entry(&shared2, data)?;
+            }
+            parameters.map_or(Ok(()), |p| save_parameters(&shared2, p))
+        })
+        .await?;
     }
     let id = start_job(
         shared,
@@ -1228,6 +1241,14 @@ fn interpret_mdi(
         // Lines are counted as the operator sees them: the preamble is line
         // 1 too, then the MDI line.
         match c {
+            // The preamble's G0/G1 only sets the motion mode: its move to
+            // where the tool is would be a needless stop.
+            Ok(c)
+                if c.source.line <= shift
+                    && matches!(
+                        c.cmd,
+                        CanonCmd::StraightTraverse { .. } | CanonCmd::StraightFeed { .. }
+                    ) => {}
             Ok(mut c) => {
                 c.source.line = c.source.line.saturating_sub(shift).max(1);
                 canons.push(c);
@@ -1302,6 +1323,27 @@ impl Environment for SaveToStore {
     fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
         save_parameters(&self.0, stored_parameters(values)?).map_err(|(_, e)| e)
     }
+}
+
+/// Keep a tool table entry a program or MDI line set (G10 L1/L10/L11) in
+/// `tool.tbl`, as LinuxCNC's tool table keeps them; the comment stays.
+fn keep_tool_entry(shared: &Shared, data: &kerf_interp::ToolData) -> Result<(), Refusal> {
+    let Ok(number) = u32::try_from(data.tool) else {
+        return Ok(());
+    };
+    if number == 0 {
+        return Ok(());
+    }
+    let mut store = shared.store.lock().expect("store lock poisoned");
+    let mut tools = store.tools().clone();
+    let entry = tools.entry(number).or_insert_with(|| Tool::new(number));
+    entry.pocket = u32::try_from(data.pocket).unwrap_or(number);
+    entry.offsets = data.offset.to_array();
+    entry.diameter = data.diameter;
+    if tools != *store.tools() {
+        store.set_tools(tools).map_err(io_refusal)?;
+    }
+    Ok(())
 }
 
 /// The persistent parameters among all of an interpreter's, by number.
@@ -1739,6 +1781,12 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
             continue;
         }
         last_line = c.source.line;
+        if let CanonCmd::SetToolTableEntry { data, .. } = &c.cmd {
+            if let Err((_, e)) = keep_tool_entry(&shared, data) {
+                failure = Some(e);
+                break;
+            }
+        }
         if let CanonCmd::Message(text) = &c.cmd {
             let mut control = shared.control.lock().expect("control lock poisoned");
             control.queue_message(tag, feed.pushed, c.source.line, text.trim().to_string());

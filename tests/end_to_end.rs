@@ -1025,6 +1025,28 @@ fn work_offsets_move_mdi_and_programs_and_their_changes_persist() {
     assert_eq!(offsets["systems"]["G55"]["y"], -3.0, "{offsets}");
     assert_eq!(offsets["g28"]["x"], 7.0, "{offsets}");
 
+    // So do tool table entries (G10 L1), into tool.tbl.
+    c.request(&Command::SetTool {
+        tool: 3,
+        pocket: None,
+        offsets: None,
+        diameter: None,
+        comment: Some("probe".into()),
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "G10 L1 P3 Z12.5 R3");
+    let tools = c.request(&Command::Tools).unwrap();
+    let t3 = &tools["tools"][0];
+    assert_eq!(
+        (&t3["offsets"]["z"], &t3["diameter"], &t3["comment"]),
+        (
+            &serde_json::json!(12.5),
+            &serde_json::json!(6.0),
+            &serde_json::json!("probe")
+        ),
+        "{tools}"
+    );
+
     let dir = kerfd.dir.clone();
     drop(c);
     drop(kerfd);

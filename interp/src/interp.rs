@@ -1109,7 +1109,9 @@ impl<'a> Interpreter<'a> {
     /// Offsets and the coordinate system are not in them: they live in the
     /// parameters (#5161–#5390), which the caller carries over through
     /// [`Config::parameters`]. The units come on a line of their own, since
-    /// within one block F is read before G20/G21 applies.
+    /// within one block F is read before G20/G21 applies. A G0 or G1 alone
+    /// in a block is a move to where the tool already is, which a caller
+    /// may drop.
     pub fn modal_gcode(&self) -> [String; 2] {
         let st = &self.st;
         let units = match st.length_units {
@@ -1140,10 +1142,12 @@ impl<'a> Interpreter<'a> {
         };
         second.push_str(&format!(" S{}", st.speed));
         // Arcs and cycles need words of their own; only G0 and G1 can stand
-        // alone in a block.
+        // alone in a block, and G1 only with a feed rate it may use (an
+        // inverse-time G1 needs its own F).
+        let g1_stands_alone = st.feed_mode != FeedMode::InverseTime && st.feed_rate > 0.0;
         match st.motion_mode {
             g::G0 => second.push_str(" G0"),
-            g::G1 => second.push_str(" G1"),
+            g::G1 if g1_stands_alone => second.push_str(" G1"),
             _ => {}
         }
         [format!("{units} {plane} {distance} {ijk}"), second]
