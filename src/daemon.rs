@@ -106,6 +106,9 @@ struct Shared {
     /// up), carried to the next MDI line; a program run or a reset drops
     /// it, as LinuxCNC's interpreter starts afresh then.
     mdi_modal: Mutex<Option<[String; 2]>>,
+    /// Number of the tool M6 last put in the spindle (0: none), so that the
+    /// next program or MDI line starts with it loaded, as the machine has it.
+    tool_in_spindle: Mutex<i32>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -237,6 +240,7 @@ impl Daemon {
                 realtime,
                 force_control: description.force_control.map(|f| f.target),
                 mdi_modal: Mutex::new(None),
+                tool_in_spindle: Mutex::new(0),
             }),
             servo,
         })
@@ -1185,6 +1189,10 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
         parameters,
     } = interpret_mdi(shared, text, shift, start)?;
     check_canons(shared, &canons, start)?;
+    let changed_tool = canons.iter().rev().find_map(|c| match c.cmd {
+        CanonCmd::ChangeTool { tool, .. } => Some(tool),
+        _ => None,
+    });
     let tool_entries: Vec<_> = canons
         .iter()
         .filter_map(|c| match &c.cmd {
@@ -1215,6 +1223,9 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
     )
     .await?;
     *shared.mdi_modal.lock().expect("MDI lock poisoned") = Some(modal);
+    if let Some(tool) = changed_tool {
+        *shared.tool_in_spindle.lock().expect("tool lock poisoned") = tool;
+    }
     Ok(json!({"mdi": id}))
 }
 
@@ -1296,12 +1307,22 @@ fn interp_config(shared: &Shared, start: Position) -> Config {
         .collect();
     // The store's tool table was validated when it was read or set, so a
     // line the interpreter's reader skips here cannot occur.
-    let (tool_table, _) =
+    let (mut tool_table, _) =
         kerf_interp::ToolTable::parse_lenient(&tools_to_text(store.tools()), false);
+    // Entry 0 is the spindle: the loaded tool's data there, as M6 leaves it.
+    let loaded = *shared.tool_in_spindle.lock().expect("tool lock poisoned");
+    let mut spindle_tool_index = 0;
+    if loaded > 0 {
+        if let Some(i) = tool_table.find(loaded) {
+            tool_table.put(0, tool_table.get(i));
+            spindle_tool_index = i;
+        }
+    }
     Config {
         tool_table,
         parameters,
         start_position: start,
+        spindle_tool_index,
         ..Config::default()
     }
 }
@@ -1786,6 +1807,9 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
                 failure = Some(e);
                 break;
             }
+        }
+        if let CanonCmd::ChangeTool { tool, .. } = c.cmd {
+            *shared.tool_in_spindle.lock().expect("tool lock poisoned") = tool;
         }
         if let CanonCmd::Message(text) = &c.cmd {
             let mut control = shared.control.lock().expect("control lock poisoned");

@@ -1150,3 +1150,28 @@ fn the_spindle_override_is_set_shown_and_checked() {
     };
     assert_eq!(seen.overrides.spindle, 50.0);
 }
+
+#[test]
+fn the_tool_m6_loads_stays_in_the_spindle_for_later_lines() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let mut offsets = serde_json::Map::new();
+    offsets.insert("z".into(), serde_json::json!(-1.5));
+    c.request(&Command::SetTool {
+        tool: 2,
+        pocket: None,
+        offsets: Some(offsets),
+        diameter: None,
+        comment: None,
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "T2 M6");
+    let end = mdi_to_end(&mut c, "G43 G0 Z0");
+    assert_eq!(axis(&end, "z"), -1.5, "G43 takes tool 2's length");
+    // A program starts with it loaded too.
+    let program = kerfd.program("g43.ngc", "G43\nG0 Z-0.25\nM2\n");
+    let end = run_to_end(&mut c, &program);
+    assert_eq!(axis(&end, "z"), -1.75);
+    mdi_to_end(&mut c, "G49 G0 Z0");
+    assert_eq!(axis(&status(&mut c), "z"), 0.0, "G49 cancels it");
+}
