@@ -15,7 +15,10 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
-use kerf_interp::{Axis, Canon, CanonCmd, Interpreter, Position, Source};
+use kerf_interp::{
+    Axis, Canon, CanonCmd, Config, Environment, Interpreter, Offline, Position, ProbeKind,
+    ProbeOutcome, Source,
+};
 use kerf_machines::Machine;
 use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment, SegmentKind};
 use serde_json::{json, Map, Value};
@@ -30,7 +33,7 @@ use crate::protocol::{
 };
 use crate::seqlock::{seqlock, Reader};
 use crate::servo::{self, Pacing, RealTime, ServoCommand, ServoThread, ServoTick, Snapshot};
-use crate::state::{Parameters, Store, Tool, COORDINATE_SYSTEMS};
+use crate::state::{tools_to_text, Parameters, Store, Tool, COORDINATE_SYSTEMS};
 
 /// Segments the planner may run ahead of the servo: the executor looks
 /// ahead over all of them (at least 2000 segments, and 0.5 s of motion even
@@ -99,6 +102,13 @@ struct Shared {
     realtime: servo::RealTimeReport,
     /// The machine's `[force_control]` target, if it has the table.
     force_control: Option<Option<f64>>,
+    /// The modal state the last MDI line left (as G-code lines that set it
+    /// up), carried to the next MDI line; a program run or a reset drops
+    /// it, as LinuxCNC's interpreter starts afresh then.
+    mdi_modal: Mutex<Option<[String; 2]>>,
+    /// Number of the tool M6 last put in the spindle (0: none), so that the
+    /// next program or MDI line starts with it loaded, as the machine has it.
+    tool_in_spindle: Mutex<i32>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -232,6 +242,8 @@ impl Daemon {
                 memory_locked,
                 realtime,
                 force_control: description.force_control.map(|f| f.target),
+                mdi_modal: Mutex::new(None),
+                tool_in_spindle: Mutex::new(0),
             }),
             servo,
         })
@@ -474,6 +486,7 @@ impl Shared {
             overrides: Overrides {
                 feed: snap.feed_override * 100.0,
                 rapid: snap.rapid_override * 100.0,
+                spindle: snap.spindle_override * 100.0,
             },
             job: control.job_status().cloned(),
             program,
@@ -821,6 +834,7 @@ async fn handle(
                     }
                     Err(e) => return Err(e),
                     Ok(was_fault) => {
+                        *shared.mdi_modal.lock().expect("MDI lock poisoned") = None;
                         if was_fault {
                             shared.send(ServoCommand::ClearFault)?;
                         }
@@ -893,11 +907,20 @@ async fn handle(
             shared.send(ServoCommand::Abort { program: tag })?;
             Ok(json!({"aborted": tag}))
         }
-        Command::Override { feed, rapid } => {
-            if feed.is_none() && rapid.is_none() {
+        Command::Override {
+            feed,
+            rapid,
+            spindle,
+        } => {
+            if feed.is_none() && rapid.is_none() && spindle.is_none() {
                 return Err(invalid(
-                    "give `feed` (0–200) and/or `rapid` (0–100), percent",
+                    "give `feed` (0–200), `rapid` (0–100) and/or `spindle` (0–200), percent",
                 ));
+            }
+            if let Some(s) = spindle.filter(|s| !(0.0..=200.0).contains(s)) {
+                return Err(invalid(format!(
+                    "spindle override {s} % is out of range 0 to 200"
+                )));
             }
             if let Some(f) = feed.filter(|f| !(0.0..=200.0).contains(f)) {
                 return Err(invalid(format!(
@@ -915,7 +938,10 @@ async fn handle(
             if let Some(r) = rapid {
                 shared.send(ServoCommand::RapidOverride(r / 100.0))?;
             }
-            Ok(json!({"feed": feed, "rapid": rapid}))
+            if let Some(s) = spindle {
+                shared.send(ServoCommand::SpindleOverride(s / 100.0))?;
+            }
+            Ok(json!({"feed": feed, "rapid": rapid, "spindle": spindle}))
         }
         Command::Offsets => {
             let store = shared.store.lock().expect("store lock poisoned");
@@ -1123,6 +1149,7 @@ async fn run(
     if from_line == 0 {
         return Err(invalid("lines count from 1"));
     }
+    *shared.mdi_modal.lock().expect("MDI lock poisoned") = None;
     let start = shared.status.read().commanded;
     let lines = check_file(shared, &path, start, from_line).await?;
     let program = Program::ready(path.clone(), lines, from_line);
@@ -1147,12 +1174,46 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
     }
     shared.observe().check_motion("run MDI", true)?;
     let start = shared.status.read().commanded;
-    // The interpreter wants a program end; MDI lines are single blocks.
-    let text = format!("{line}\nM2\n");
-    let canons: Vec<Canon> = Interpreter::from_text(text, "MDI", start)
-        .collect::<Result<_, _>>()
-        .map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
+    // One MDI session is one interpreter's state: the last line's modal
+    // state is set up first, and `%` (not M2, which resets the modes and
+    // the coordinate system) ends the text.
+    let modal = shared.mdi_modal.lock().expect("MDI lock poisoned").clone();
+    let preamble: Vec<String> = modal.map(Vec::from).unwrap_or_default();
+    let shift = 1 + preamble.len() as u32;
+    let mut text = String::from("%\n");
+    for l in &preamble {
+        text.push_str(l);
+        text.push('\n');
+    }
+    text.push_str(&format!("{line}\n%\n"));
+    let MdiLine {
+        canons,
+        modal,
+        parameters,
+    } = interpret_mdi(shared, text, shift, start)?;
     check_canons(shared, &canons, start)?;
+    let changed_tool = canons.iter().rev().find_map(|c| match c.cmd {
+        CanonCmd::ChangeTool { tool, .. } => Some(tool),
+        _ => None,
+    });
+    let tool_entries: Vec<_> = canons
+        .iter()
+        .filter_map(|c| match &c.cmd {
+            CanonCmd::SetToolTableEntry { data, .. } => Some(*data),
+            _ => None,
+        })
+        .collect();
+    if parameters.is_some() || !tool_entries.is_empty() {
+        // Before it moves: a line whose changes cannot be kept is refused.
+        let shared2 = shared.clone();
+        blocking(move || {
+            for data in &tool_entries {
+                keep_tool_entry(&shared2, data)?;
+            }
+            parameters.map_or(Ok(()), |p| save_parameters(&shared2, p))
+        })
+        .await?;
+    }
     let id = start_job(
         shared,
         "run MDI",
@@ -1164,7 +1225,181 @@ async fn mdi(shared: &Arc<Shared>, line: String) -> Result<Value, Refusal> {
         false,
     )
     .await?;
+    *shared.mdi_modal.lock().expect("MDI lock poisoned") = Some(modal);
+    if let Some(tool) = changed_tool {
+        *shared.tool_in_spindle.lock().expect("tool lock poisoned") = tool;
+    }
     Ok(json!({"mdi": id}))
+}
+
+/// Interpret MDI `text` whose first `shift` lines are the `%` and the
+/// modal preamble; returns its canon and the modal state it leaves. Apart
+/// from `mdi` because the interpreter is not `Send` and so cannot live in
+/// an async function across an await.
+fn interpret_mdi(
+    shared: &Arc<Shared>,
+    text: String,
+    shift: u32,
+    start: Position,
+) -> Result<MdiLine, Refusal> {
+    let held = Arc::new(Mutex::new(None));
+    let mut interp = Interpreter::with_source(
+        Box::new(std::io::Cursor::new(text.into_bytes())),
+        "MDI",
+        None,
+        interp_config(shared, start),
+        Box::new(HoldParameters(held.clone())),
+    );
+    let mut canons = Vec::new();
+    for c in interp.by_ref() {
+        // Lines are counted as the operator sees them: the preamble is line
+        // 1 too, then the MDI line.
+        match c {
+            // The preamble's G0/G1 only sets the motion mode: its move to
+            // where the tool is would be a needless stop.
+            Ok(c)
+                if c.source.line <= shift
+                    && matches!(
+                        c.cmd,
+                        CanonCmd::StraightTraverse { .. } | CanonCmd::StraightFeed { .. }
+                    ) => {}
+            Ok(mut c) => {
+                c.source.line = c.source.line.saturating_sub(shift).max(1);
+                canons.push(c);
+            }
+            Err(mut e) => {
+                e.line = e.line.saturating_sub(shift).max(1);
+                return Err((ErrorCode::ProgramError, e.to_string()));
+            }
+        }
+    }
+    let modal = interp.modal_gcode();
+    drop(interp);
+    let parameters = held
+        .lock()
+        .expect("MDI parameters lock poisoned")
+        .take()
+        .transpose()
+        .map_err(|e| (ErrorCode::ProgramError, format!("MDI: {e}")))?;
+    Ok(MdiLine {
+        canons,
+        modal,
+        parameters,
+    })
+}
+
+/// An interpreted MDI line.
+struct MdiLine {
+    canons: Vec<Canon>,
+    /// G-code that sets up the modes the line leaves.
+    modal: [String; 2],
+    /// The parameters it leaves (none if the interpreter saved none).
+    parameters: Option<Parameters>,
+}
+
+/// The interpreter set-up of a run or MDI: it starts from the daemon's
+/// stored parameters (work offsets, G92, G28/G30 positions, active
+/// coordinate system) and tool table, at the machine's position.
+fn interp_config(shared: &Shared, start: Position) -> Config {
+    let store = shared.store.lock().expect("store lock poisoned");
+    let parameters = store
+        .parameters()
+        .to_numbered()
+        .into_iter()
+        .map(|(n, v)| (n as usize, v))
+        .collect();
+    // The store's tool table was validated when it was read or set, so a
+    // line the interpreter's reader skips here cannot occur.
+    let (mut tool_table, _) =
+        kerf_interp::ToolTable::parse_lenient(&tools_to_text(store.tools()), false);
+    // Entry 0 is the spindle: the loaded tool's data there, as M6 leaves it.
+    let loaded = *shared.tool_in_spindle.lock().expect("tool lock poisoned");
+    let mut spindle_tool_index = 0;
+    if loaded > 0 {
+        if let Some(i) = tool_table.find(loaded) {
+            tool_table.put(0, tool_table.get(i));
+            spindle_tool_index = i;
+        }
+    }
+    Config {
+        tool_table,
+        parameters,
+        start_position: start,
+        spindle_tool_index,
+        ..Config::default()
+    }
+}
+
+/// The environment of programs and MDI the machine runs: the parameters a
+/// program leaves (G10 L2, G92, G28.1 …) go to the same parameter file the
+/// `offsets` commands use, written atomically, so `offsets` shows them and
+/// a restart keeps them. The interpreter saves when its program ends, which
+/// is when it has read the program, a little ahead of the motion.
+struct SaveToStore(Arc<Shared>);
+
+impl Environment for SaveToStore {
+    fn probe(&mut self, start: Position, end: Position, kind: ProbeKind) -> ProbeOutcome {
+        // The simulated machine has no probe input: the offline model
+        // (no trip at the programmed end) is what the check planned too.
+        Offline::default().probe(start, end, kind)
+    }
+
+    fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
+        save_parameters(&self.0, stored_parameters(values)?).map_err(|(_, e)| e)
+    }
+}
+
+/// Keep a tool table entry a program or MDI line set (G10 L1/L10/L11) in
+/// `tool.tbl`, as LinuxCNC's tool table keeps them; the comment stays.
+fn keep_tool_entry(shared: &Shared, data: &kerf_interp::ToolData) -> Result<(), Refusal> {
+    let Ok(number) = u32::try_from(data.tool) else {
+        return Ok(());
+    };
+    if number == 0 {
+        return Ok(());
+    }
+    let mut store = shared.store.lock().expect("store lock poisoned");
+    let mut tools = store.tools().clone();
+    let entry = tools.entry(number).or_insert_with(|| Tool::new(number));
+    entry.pocket = u32::try_from(data.pocket).unwrap_or(number);
+    entry.offsets = data.offset.to_array();
+    entry.diameter = data.diameter;
+    if tools != *store.tools() {
+        store.set_tools(tools).map_err(io_refusal)?;
+    }
+    Ok(())
+}
+
+/// The persistent parameters among all of an interpreter's, by number.
+fn stored_parameters(values: &[f64]) -> Result<Parameters, String> {
+    let numbered = (5161..=5390u32)
+        .filter_map(|n| values.get(n as usize).map(|v| (n, *v)))
+        .collect();
+    Parameters::from_numbered(&numbered)
+}
+
+/// Write `p` to the parameter file if it differs from what is stored.
+fn save_parameters(shared: &Shared, p: Parameters) -> Result<(), Refusal> {
+    let mut store = shared.store.lock().expect("store lock poisoned");
+    if *store.parameters() != p {
+        store.set_parameters(p).map_err(io_refusal)?;
+    }
+    Ok(())
+}
+
+/// The environment of MDI lines: the parameters the line leaves are held
+/// until the line has passed its check, so a refused line changes nothing.
+struct HoldParameters(Arc<Mutex<Option<Result<Parameters, String>>>>);
+
+impl Environment for HoldParameters {
+    fn probe(&mut self, start: Position, end: Position, kind: ProbeKind) -> ProbeOutcome {
+        Offline::default().probe(start, end, kind)
+    }
+
+    fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
+        *self.0.lock().expect("MDI parameters lock poisoned") = Some(stored_parameters(values));
+        Ok(())
+    }
 }
 
 /// A canon command of a job kerfd makes itself (jog, homing): line 1 of
@@ -1478,6 +1713,7 @@ async fn check_file(
 ) -> Result<u32, Refusal> {
     let kins = shared.kins.clone();
     let config = shared.planner;
+    let config_for_check = interp_config(shared, start);
     let path = path.to_path_buf();
     blocking(move || {
         let io_err = |e: std::io::Error| {
@@ -1486,7 +1722,10 @@ async fn check_file(
                 format!("cannot read {}: {e}", path.display()),
             )
         };
-        let interp = Interpreter::open(&path, start).map_err(io_err)?;
+        // A check only: what the program would leave in the parameters is
+        // kept when it really runs.
+        let interp = Interpreter::open_with(&path, config_for_check, Box::new(Offline::default()))
+            .map_err(io_err)?;
         let mut planner = Planner::new(&*kins, start, config);
         for canon in interp {
             let canon = canon.map_err(|e| (ErrorCode::ProgramError, e.to_string()))?;
@@ -1539,7 +1778,11 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
     let mut planner = Planner::new(&*shared.kins, start, config);
     let canons: Box<dyn Iterator<Item = Result<Canon, String>>> = match source {
         JobSource::Canons(c) => Box::new(c.into_iter().map(Ok)),
-        JobSource::File(path) => match Interpreter::open(&path, start) {
+        JobSource::File(path) => match Interpreter::open_with(
+            &path,
+            interp_config(&shared, start),
+            Box::new(SaveToStore(shared.clone())),
+        ) {
             Ok(i) => Box::new(i.map(|r| r.map_err(|e| e.to_string()))),
             Err(e) => {
                 failure = Some(format!("cannot read {}: {e}", path.display()));
@@ -1562,6 +1805,15 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
             continue;
         }
         last_line = c.source.line;
+        if let CanonCmd::SetToolTableEntry { data, .. } = &c.cmd {
+            if let Err((_, e)) = keep_tool_entry(&shared, data) {
+                failure = Some(e);
+                break;
+            }
+        }
+        if let CanonCmd::ChangeTool { tool, .. } = c.cmd {
+            *shared.tool_in_spindle.lock().expect("tool lock poisoned") = tool;
+        }
         if let CanonCmd::Message(text) = &c.cmd {
             let mut control = shared.control.lock().expect("control lock poisoned");
             control.queue_message(tag, feed.pushed, c.source.line, text.trim().to_string());

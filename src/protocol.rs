@@ -113,12 +113,15 @@ pub enum Command {
     Step,
     /// Stop the program, MDI, jog or homing, decelerating on the path.
     Abort,
-    /// Set the feed (0–200) and/or rapid (0–100) override, percent.
+    /// Set the feed (0–200), rapid (0–100) and/or spindle speed (0–200)
+    /// override, percent.
     Override {
         #[serde(default)]
         feed: Option<f64>,
         #[serde(default)]
         rapid: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        spindle: Option<f64>,
     },
     /// Read the work offsets, G92 offset and G28/G30 positions.
     Offsets,
@@ -353,6 +356,8 @@ pub struct Overrides {
     pub feed: f64,
     /// Rapid override, 0 to 100.
     pub rapid: f64,
+    /// Spindle speed override, 0 to 200.
+    pub spindle: f64,
 }
 
 /// Servo thread figures.

@@ -37,6 +37,8 @@ pub enum ServoCommand {
     FeedOverride(f64),
     /// Rapid override factor, 0 to 1.
     RapidOverride(f64),
+    /// Spindle speed override factor, 0 to 2.
+    SpindleOverride(f64),
     /// Feed hold on (decelerate on the path and wait) or off (resume).
     Hold(bool),
     /// Single-block mode on or off.
@@ -135,6 +137,8 @@ pub struct Snapshot {
     /// Feed and rapid override factors in force.
     pub feed_override: f64,
     pub rapid_override: f64,
+    /// Spindle speed override factor in force.
+    pub spindle_override: f64,
     /// Feed hold is on.
     pub hold: bool,
     /// Commanded tool position.
@@ -177,6 +181,7 @@ impl Snapshot {
             velocity: 0.0,
             feed_override: 1.0,
             rapid_override: 1.0,
+            spindle_override: 1.0,
             hold: false,
             commanded: position,
             position,
@@ -396,6 +401,9 @@ impl ServoTick {
         match cmd {
             ServoCommand::FeedOverride(f) => self.executor.set_feed_override(f),
             ServoCommand::RapidOverride(f) => self.executor.set_rapid_override(f),
+            // Outside the executor, so it survives a re-enable as the
+            // other overrides do.
+            ServoCommand::SpindleOverride(f) => self.snapshot.spindle_override = f,
             ServoCommand::Hold(on) => self.executor.set_hold(on),
             ServoCommand::SingleBlock(on) => {
                 self.executor.set_single_block(on);
@@ -680,7 +688,9 @@ impl ServoTick {
         if self.setpoints.enable {
             self.loops
                 .update(&next[..n], &measured[..n], self.period, &mut effort[..n]);
-            self.setpoints.spindle_speed = self.spindle_rpm;
+            // The simulated cut sees the overridden speed, as a real
+            // spindle drive would turn at it.
+            self.setpoints.spindle_speed = self.spindle_rpm * self.snapshot.spindle_override;
         } else {
             self.loops.reset(&measured[..n]);
             self.setpoints.spindle_speed = 0.0;

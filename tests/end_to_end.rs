@@ -545,7 +545,12 @@ fn overrides_scale_the_feed_and_the_rapids() {
     let kerfd = Kerfd::start(&[]);
     let mut c = kerfd.ready_client();
     let set = |c: &mut Client, feed: Option<f64>, rapid: Option<f64>| {
-        c.request(&Command::Override { feed, rapid }).unwrap();
+        c.request(&Command::Override {
+            feed,
+            rapid,
+            spindle: None,
+        })
+        .unwrap();
     };
     // Out of range on purpose, so not through the schema-checking client.
     let mut raw = Client::connect(&kerfd.socket).unwrap();
@@ -553,7 +558,8 @@ fn overrides_scale_the_feed_and_the_rapids() {
         code_of(
             raw.request(&Command::Override {
                 feed: Some(250.0),
-                rapid: None
+                rapid: None,
+                spindle: None,
             })
             .unwrap_err()
         )
@@ -784,6 +790,7 @@ fn every_command_and_event_matches_the_schema() {
     c.request(&Command::Override {
         feed: Some(100.0),
         rapid: None,
+        spindle: Some(80.0),
     })
     .unwrap();
     let id = c
@@ -971,4 +978,200 @@ fn the_cli_drives_the_machine_and_prints_for_people_and_scripts() {
     assert!(line.contains("e-stop"), "{line}");
     watch.kill().unwrap();
     watch.wait().unwrap();
+}
+
+fn mdi_to_end(c: &mut Client, line: &str) -> Status {
+    let id = c
+        .request(&Command::Mdi { line: line.into() })
+        .unwrap_or_else(|e| panic!("mdi {line:?}: {e}"))["mdi"]
+        .as_u64()
+        .unwrap() as u32;
+    c.wait_job(id, 100.0, |_| {}).unwrap()
+}
+
+#[test]
+fn work_offsets_move_mdi_and_programs_and_their_changes_persist() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let mut values = serde_json::Map::new();
+    values.insert("x".into(), serde_json::json!(7.5));
+    c.request(&Command::SetOffset {
+        system: "G54".into(),
+        values,
+    })
+    .unwrap();
+    let end = mdi_to_end(&mut c, "G54 G0 X10");
+    assert_eq!(axis(&end, "x"), 17.5, "X10 in G54 is machine X 10 + 7.5");
+
+    mdi_to_end(&mut c, "G10 L2 P1 X5");
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G54"]["x"], 5.0, "{offsets}");
+    let end = mdi_to_end(&mut c, "G0 X1");
+    assert_eq!(axis(&end, "x"), 6.0, "the new offset applies at once");
+    // A refused line (Z5 is beyond the travel) changes no parameter.
+    assert!(c
+        .request(&Command::Mdi {
+            line: "G55 G0 Z5".into()
+        })
+        .is_err());
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["active"], "G54", "{offsets}");
+
+    // A program's G10 L2 and G28.1 come back too.
+    let program = kerfd.program("g10.ngc", "G10 L2 P2 Y-3\nG0 X2\nG28.1\nM2\n");
+    let end = run_to_end(&mut c, &program);
+    assert_eq!(axis(&end, "x"), 7.0);
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G55"]["y"], -3.0, "{offsets}");
+    assert_eq!(offsets["g28"]["x"], 7.0, "{offsets}");
+
+    // So do tool table entries (G10 L1), into tool.tbl.
+    c.request(&Command::SetTool {
+        tool: 3,
+        pocket: None,
+        offsets: None,
+        diameter: None,
+        comment: Some("probe".into()),
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "G10 L1 P3 Z12.5 R3");
+    let tools = c.request(&Command::Tools).unwrap();
+    let t3 = &tools["tools"][0];
+    assert_eq!(
+        (&t3["offsets"]["z"], &t3["diameter"], &t3["comment"]),
+        (
+            &serde_json::json!(12.5),
+            &serde_json::json!(6.0),
+            &serde_json::json!("probe")
+        ),
+        "{tools}"
+    );
+
+    let dir = kerfd.dir.clone();
+    drop(c);
+    drop(kerfd);
+    let kerfd = Kerfd::start_in(dir, &[], &[]);
+    let mut c = kerfd.ready_client();
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["systems"]["G54"]["x"], 5.0, "{offsets}");
+    assert_eq!(offsets["systems"]["G55"]["y"], -3.0, "{offsets}");
+    let end = mdi_to_end(&mut c, "G0 X0");
+    assert_eq!(
+        axis(&end, "x"),
+        5.0,
+        "the kept offset applies after a restart"
+    );
+}
+
+#[test]
+fn mdi_keeps_the_modal_state_until_a_run_or_reset() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let x0 = axis(&status(&mut c), "x");
+    mdi_to_end(&mut c, "G91");
+    mdi_to_end(&mut c, "G0 X1");
+    let end = mdi_to_end(&mut c, "G0 X1");
+    assert_eq!(axis(&end, "x"), x0 + 2.0, "G91 held for both moves");
+
+    // Units, the feed rate, G1 and the coordinate system carry over too.
+    let mut values = serde_json::Map::new();
+    values.insert("y".into(), serde_json::json!(2.0));
+    c.request(&Command::SetOffset {
+        system: "G55".into(),
+        values,
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "G90 G20 G55");
+    mdi_to_end(&mut c, "G1 F100 X0.5");
+    let end = mdi_to_end(&mut c, "Y1");
+    assert!((axis(&end, "x") - 12.7).abs() < 1e-9, "{end:?}");
+    assert!((axis(&end, "y") - 27.4).abs() < 1e-9, "{end:?}");
+    let offsets = c.request(&Command::Offsets).unwrap();
+    assert_eq!(offsets["active"], "G55", "{offsets}");
+
+    // A reset starts afresh (mm, absolute); the coordinate system is a
+    // parameter and stays, as in LinuxCNC.
+    c.request(&Command::Estop).unwrap();
+    support::ready(&mut c);
+    let end = mdi_to_end(&mut c, "G0 X3");
+    assert_eq!(axis(&end, "x"), 3.0);
+}
+
+#[test]
+fn the_spindle_override_is_set_shown_and_checked() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    assert_eq!(status(&mut c).overrides.spindle, 100.0);
+    let reply = c
+        .request(&Command::Override {
+            feed: None,
+            rapid: None,
+            spindle: Some(80.0),
+        })
+        .unwrap();
+    assert_eq!(reply["spindle"], 80.0);
+    let seen = loop {
+        let s = status(&mut c);
+        if s.overrides.spindle != 100.0 {
+            break s;
+        }
+    };
+    assert_eq!(seen.overrides.spindle, 80.0);
+    assert_eq!(seen.overrides.feed, 100.0, "the feed override is untouched");
+    // Out of range on purpose, so not through the schema-checking client.
+    let mut raw = Client::connect(&kerfd.socket).unwrap();
+    let (code, msg) = code_of(
+        raw.request(&Command::Override {
+            feed: None,
+            rapid: None,
+            spindle: Some(201.0),
+        })
+        .unwrap_err(),
+    );
+    assert_eq!(code, ErrorCode::InvalidArgument);
+    assert!(msg.contains("spindle override 201"), "{msg}");
+
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args([
+            "--socket",
+            kerfd.socket.to_str().unwrap(),
+            "override",
+            "spindle",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{out:?}");
+    let seen = loop {
+        let s = status(&mut c);
+        if s.overrides.spindle != 80.0 {
+            break s;
+        }
+    };
+    assert_eq!(seen.overrides.spindle, 50.0);
+}
+
+#[test]
+fn the_tool_m6_loads_stays_in_the_spindle_for_later_lines() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let mut offsets = serde_json::Map::new();
+    offsets.insert("z".into(), serde_json::json!(-1.5));
+    c.request(&Command::SetTool {
+        tool: 2,
+        pocket: None,
+        offsets: Some(offsets),
+        diameter: None,
+        comment: None,
+    })
+    .unwrap();
+    mdi_to_end(&mut c, "T2 M6");
+    let end = mdi_to_end(&mut c, "G43 G0 Z0");
+    assert_eq!(axis(&end, "z"), -1.5, "G43 takes tool 2's length");
+    // A program starts with it loaded too.
+    let program = kerfd.program("g43.ngc", "G43\nG0 Z-0.25\nM2\n");
+    let end = run_to_end(&mut c, &program);
+    assert_eq!(axis(&end, "z"), -1.75);
+    mdi_to_end(&mut c, "G49 G0 Z0");
+    assert_eq!(axis(&status(&mut c), "z"), 0.0, "G49 cancels it");
 }

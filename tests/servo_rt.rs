@@ -316,3 +316,35 @@ fn control_loops_plant_and_force_control_run_without_allocating() {
         "override went no lower than {lowest_override}"
     );
 }
+
+/// The spindle override scales the speed the servo gives the spindle (and
+/// so the simulated cut), and survives the drives going off and on.
+#[test]
+fn the_spindle_override_scales_the_commanded_spindle_speed() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/aluminium-step.toml");
+    let machine = kerf_machines::load(path).unwrap();
+    let rpm = machine.description.spindle.as_ref().unwrap().rpm;
+    let kins = machine.kinematics.clone();
+    let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
+    let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
+    let (_producer, consumer) = rtrb::RingBuffer::<Segment>::new(16);
+    let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
+    let mut tick =
+        ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
+    tick.configure(&machine.description);
+    commands.push(ServoCommand::Enable(true)).unwrap();
+    tick.tick();
+    tick.tick();
+    assert_eq!(tick.setpoints().spindle_speed, rpm);
+    commands.push(ServoCommand::SpindleOverride(0.8)).unwrap();
+    tick.tick();
+    tick.tick();
+    assert_eq!(tick.setpoints().spindle_speed, rpm * 0.8);
+    assert_eq!(tick.snapshot().spindle_override, 0.8);
+    commands.push(ServoCommand::Enable(false)).unwrap();
+    tick.tick();
+    commands.push(ServoCommand::Enable(true)).unwrap();
+    tick.tick();
+    tick.tick();
+    assert_eq!(tick.setpoints().spindle_speed, rpm * 0.8);
+}

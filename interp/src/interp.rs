@@ -1102,6 +1102,57 @@ impl<'a> Interpreter<'a> {
         self.st.params.get(n).copied().unwrap_or(0.0)
     }
 
+    /// G-code lines that set up the modal state the interpreter is in now:
+    /// units, plane, distance modes, feed mode, feed rate, spindle speed and
+    /// G0/G1 motion mode. Put before the next program text, they carry that
+    /// state over as LinuxCNC's MDI keeps it from one line to the next.
+    /// Offsets and the coordinate system are not in them: they live in the
+    /// parameters (#5161–#5390), which the caller carries over through
+    /// [`Config::parameters`]. The units come on a line of their own, since
+    /// within one block F is read before G20/G21 applies. A G0 or G1 alone
+    /// in a block is a move to where the tool already is, which a caller
+    /// may drop.
+    pub fn modal_gcode(&self) -> [String; 2] {
+        let st = &self.st;
+        let units = match st.length_units {
+            Units::Inch => "G20",
+            Units::Mm => "G21",
+        };
+        let plane = match st.plane {
+            Plane::XY => "G17",
+            Plane::XZ => "G18",
+            Plane::YZ => "G19",
+            Plane::UV => "G17.1",
+            Plane::VW => "G19.1",
+            Plane::UW => "G18.1",
+        };
+        let distance = match st.distance_mode {
+            Distance::Absolute => "G90",
+            Distance::Incremental => "G91",
+        };
+        let ijk = match st.ijk_distance_mode {
+            Distance::Absolute => "G90.1",
+            Distance::Incremental => "G91.1",
+        };
+        let mut second = match st.feed_mode {
+            // An inverse-time F holds for one block only: none to carry.
+            FeedMode::InverseTime => "G93".to_string(),
+            FeedMode::UnitsPerMinute => format!("G94 F{}", st.feed_rate),
+            FeedMode::UnitsPerRevolution => format!("G95 F{}", st.feed_rate),
+        };
+        second.push_str(&format!(" S{}", st.speed));
+        // Arcs and cycles need words of their own; only G0 and G1 can stand
+        // alone in a block, and G1 only with a feed rate it may use (an
+        // inverse-time G1 needs its own F).
+        let g1_stands_alone = st.feed_mode != FeedMode::InverseTime && st.feed_rate > 0.0;
+        match st.motion_mode {
+            g::G0 => second.push_str(" G0"),
+            g::G1 if g1_stands_alone => second.push_str(" G1"),
+            _ => {}
+        }
+        [format!("{units} {plane} {distance} {ijk}"), second]
+    }
+
     /// How the program ended, once it has.
     pub fn ending(&self) -> Option<Ending> {
         self.exit_status

@@ -712,3 +712,38 @@ fn m170_and_m171_switch_force_control_without_a_user_program() {
     }
     assert!(error("M172\nM2\n").contains("Unknown m code used: M172"));
 }
+
+/// The modes one program text leaves, set up again by `modal_gcode` before
+/// another, give the same motion as one program would (MDI's carry-over).
+#[test]
+fn modal_gcode_carries_the_modes_to_the_next_text() {
+    let mut first = kerf_interp::Interpreter::from_text(
+        "%\nG20 G91 G18\nG1 F20 S900\n%\n",
+        "a",
+        Position::ZERO,
+    );
+    for c in first.by_ref() {
+        c.unwrap();
+    }
+    let modal = first.modal_gcode();
+    assert_eq!(modal[0], "G20 G18 G91 G91.1");
+    assert_eq!(modal[1], "G94 F20 S900 G1");
+    let text = format!("%\n{}\n{}\nX1\nX1\n%\n", modal[0], modal[1]);
+    let second = kerf_interp::Interpreter::from_text(text, "b", Position::ZERO);
+    let ends: Vec<_> = second
+        .map(|c| c.unwrap().cmd)
+        .filter_map(|cmd| match cmd {
+            kerf_interp::CanonCmd::StraightFeed { end, .. } => Some(end.x),
+            _ => None,
+        })
+        .collect();
+    // The G1 of the modal lines is a move to where the tool is.
+    assert_eq!(ends, [0.0, 25.4, 50.8]);
+
+    // An inverse-time G1 needs its own F: the mode is not carried then.
+    let mut g93 = kerf_interp::Interpreter::from_text("%\nG93 G1 X1 F10\n%\n", "c", Position::ZERO);
+    for c in g93.by_ref() {
+        c.unwrap();
+    }
+    assert_eq!(g93.modal_gcode()[1], "G93 S0");
+}

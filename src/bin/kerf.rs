@@ -101,10 +101,11 @@ enum Cmd {
         /// Joint name or number.
         joint: Option<String>,
     },
-    /// Set the feed (0–200) or rapid (0–100) override, percent.
+    /// Set the feed (0–200), rapid (0–100) or spindle speed (0–200)
+    /// override, percent.
     Override {
-        /// `feed` or `rapid`.
-        #[arg(value_parser = ["feed", "rapid"])]
+        /// `feed`, `rapid` or `spindle`.
+        #[arg(value_parser = ["feed", "rapid", "spindle"])]
         which: String,
         /// Percent.
         percent: f64,

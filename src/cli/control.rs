@@ -116,21 +116,28 @@ pub fn jog(socket: &Path, jog: &Jog, json: bool) -> Result<(), Failure> {
     .map(|_| ())
 }
 
-/// `kerf override feed|rapid PERCENT`.
+/// `kerf override feed|rapid|spindle PERCENT`.
 pub fn set_override(socket: &Path, which: &str, percent: f64, json: bool) -> Result<(), Failure> {
     let cmd = match which {
         "feed" => Command::Override {
             feed: Some(percent),
             rapid: None,
+            spindle: None,
         },
         "rapid" => Command::Override {
             feed: None,
             rapid: Some(percent),
+            spindle: None,
+        },
+        "spindle" => Command::Override {
+            feed: None,
+            rapid: None,
+            spindle: Some(percent),
         },
         other => {
             return Err(Failure(
                 super::CANNOT_CONNECT,
-                format!("override {other:?}: use `feed` or `rapid`"),
+                format!("override {other:?}: use `feed`, `rapid` or `spindle`"),
             ))
         }
     };

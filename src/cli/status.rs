@@ -28,8 +28,9 @@ pub fn status(socket: &Path, json: bool, latency: bool) -> Result<(), Failure> {
     println!("line      {}", status.line);
     println!("position  {}", fmt_position(&status));
     println!(
-        "speed     {:.1} mm/min   feed override {:.0} %   rapid override {:.0} %",
-        status.velocity, status.overrides.feed, status.overrides.rapid
+        "speed     {:.1} mm/min   feed override {:.0} %   rapid override {:.0} %   \
+         spindle override {:.0} %",
+        status.velocity, status.overrides.feed, status.overrides.rapid, status.overrides.spindle
     );
     if let Some(p) = &status.program {
         println!("program   #{} {} ({})", p.id, p.file, name(&p.state));

@@ -29,8 +29,8 @@ pub fn render(status: &Status, messages: &[String]) -> String {
         ));
     }
     s.push_str(&format!(
-        "\n  speed {:>9.1} mm/min   feed {:>3.0} %   rapid {:>3.0} %\n",
-        status.velocity, status.overrides.feed, status.overrides.rapid
+        "\n  speed {:>9.1} mm/min   feed {:>3.0} %   rapid {:>3.0} %   spindle {:>3.0} %\n",
+        status.velocity, status.overrides.feed, status.overrides.rapid, status.overrides.spindle
     ));
     if let Some(p) = &status.program {
         let done = if p.lines > 0 {
