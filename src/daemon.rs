@@ -109,6 +109,10 @@ struct Shared {
     /// Number of the tool M6 last put in the spindle (0: none), so that the
     /// next program or MDI line starts with it loaded, as the machine has it.
     tool_in_spindle: Mutex<i32>,
+    /// Up from a job's start until its planner thread has queued the final
+    /// `Stop` marker: a servo on a virtual clock waits on an empty queue
+    /// meanwhile, so a run never depends on how fast the planner is.
+    streaming: Arc<AtomicBool>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -184,6 +188,8 @@ impl Daemon {
             .map(|j| j.following_error)
             .collect();
         tick.set_following_error_limits(&limits);
+        let streaming = Arc::new(AtomicBool::new(false));
+        tick.set_streaming_flag(streaming.clone());
         let (writer, reader) = seqlock(*tick.snapshot());
         let realtime = match options.pacing {
             Pacing::Wall => options.realtime,
@@ -244,6 +250,7 @@ impl Daemon {
                 force_control: description.force_control.map(|f| f.target),
                 mdi_modal: Mutex::new(None),
                 tool_in_spindle: Mutex::new(0),
+                streaming,
             }),
             servo,
         })
@@ -1591,6 +1598,7 @@ async fn start_job(
     drop(control);
     sent?;
     let stream_shared = shared.clone();
+    shared.streaming.store(true, Ordering::Release);
     std::thread::Builder::new()
         .name(format!("kerf-plan-{tag}"))
         .spawn(move || {
@@ -1611,6 +1619,7 @@ async fn start_job(
             stream(stream_shared, feed, job)
         })
         .map_err(|e| {
+            shared.streaming.store(false, Ordering::Release);
             (
                 ErrorCode::IoError,
                 format!("cannot start the planner thread: {e}"),
@@ -1840,6 +1849,7 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
     // there (or, aborting, knows where the job's segments end).
     let marker = Segment::marker(SegmentKind::Stop { tag }, last_line, planner.position());
     push(&mut feed, marker, None);
+    shared.streaming.store(false, Ordering::Release);
     if let Some(reason) = failure {
         tracing::warn!(job = tag, %reason, "job failed");
         shared

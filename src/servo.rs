@@ -206,6 +206,9 @@ struct Export {
 
 /// Everything one servo tick touches.
 pub struct ServoTick {
+    /// Set while a planner thread is still feeding the queue (see
+    /// [`ServoTick::set_streaming_flag`]); read only on a virtual clock.
+    streaming: Option<Arc<AtomicBool>>,
     period: f64,
     executor: Executor,
     kins: Arc<dyn Kinematics>,
@@ -263,6 +266,7 @@ impl ServoTick {
             fb.position = *q;
         }
         Ok(ServoTick {
+            streaming: None,
             period,
             executor: Executor::new(start),
             kins,
@@ -341,6 +345,23 @@ impl ServoTick {
             force: fc.last_step().force,
             feed_override: fc.feed_override(),
         });
+    }
+
+    /// Share the flag a planner thread holds up while it still has
+    /// segments to queue. On a virtual clock an empty queue then means the
+    /// planner is behind, not that the program has ended, and the servo
+    /// waits for it instead of stopping the machine mid-path.
+    pub fn set_streaming_flag(&mut self, flag: Arc<AtomicBool>) {
+        self.streaming = Some(flag);
+    }
+
+    /// True while the queue is empty but a planner thread is still feeding it.
+    fn starved(&self) -> bool {
+        self.queue.slots() == 0
+            && self
+                .streaming
+                .as_ref()
+                .is_some_and(|f| f.load(Ordering::Acquire))
     }
 
     /// True once everything the executor needs ahead is queued: the queue
@@ -940,7 +961,7 @@ fn run_virtual(tick: &mut ServoTick, status: &mut Writer<Snapshot>, stop: &Atomi
     while !stop.load(Ordering::Relaxed) {
         // Wait for the planner (it is fast; this is rarely more than a
         // few polls), so the executor sees the same queue as on a real run.
-        while !tick.input_complete() && !stop.load(Ordering::Relaxed) {
+        while (!tick.input_complete() || tick.starved()) && !stop.load(Ordering::Relaxed) {
             std::thread::sleep(Duration::from_micros(50));
         }
         let snap = *tick.tick();
