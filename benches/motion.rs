@@ -179,6 +179,17 @@ fn lower_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> f64 {
         .sum()
 }
 
+/// LinuxCNC's planner stress file stellabee1.ngc (G18 profiles in inches,
+/// arcs and dense lines), shifted into mill3's travel with a G54 offset.
+fn stellabee() -> Option<String> {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/conformance/linuxcnc-programs/tp-stress/performance/stellabee1.ngc"
+    );
+    let text = std::fs::read_to_string(path).ok()?;
+    Some(format!("G21 G10 L2 P1 X100 Y50 Z-20\nG54\n{text}"))
+}
+
 fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     let t0 = Instant::now();
     let mut canon = 0usize;
@@ -251,6 +262,10 @@ fn main() {
     println!();
     println!("Planning throughput");
     throughput("spiral 0.02 mm, 20k seg", &spiral(20_000), kins);
+    match stellabee() {
+        Some(text) => throughput("stellabee1.ngc (169k lines)", &text, kins),
+        None => println!("stellabee1.ngc: not found under ../shared/conformance; skipped"),
+    }
     if !quick {
         throughput("spiral 0.02 mm, 1M seg", &spiral(1_000_000), kins);
     }
