@@ -113,6 +113,9 @@ struct Shared {
     /// `Stop` marker: a servo on a virtual clock waits on an empty queue
     /// meanwhile, so a run never depends on how fast the planner is.
     streaming: Arc<AtomicBool>,
+    /// The answer to the M66 the running program waits on, handed from its
+    /// planner thread to the interpreter's environment (#5399).
+    input_answer: Mutex<Option<f64>>,
 }
 
 /// A running daemon: the servo thread and the state the socket serves.
@@ -231,6 +234,8 @@ impl Daemon {
                     period,
                     digital_outputs: hal_config.pins.digital_out.len(),
                     analog_outputs: hal_config.pins.analog_out.len(),
+                    digital_inputs: hal_config.pins.digital_in.len(),
+                    analog_inputs: hal_config.pins.analog_in.len(),
                     ..PlannerConfig::default()
                 },
                 control: Mutex::new(Control::new(joint_names)),
@@ -251,6 +256,7 @@ impl Daemon {
                 mdi_modal: Mutex::new(None),
                 tool_in_spindle: Mutex::new(0),
                 streaming,
+                input_answer: Mutex::new(None),
             }),
             servo,
         })
@@ -1354,6 +1360,18 @@ impl Environment for SaveToStore {
     fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {
         save_parameters(&self.0, stored_parameters(values)?).map_err(|(_, e)| e)
     }
+
+    fn wait_input(&mut self, index: u32, digital: bool, mode: u8, timeout: f64, prev: f64) -> f64 {
+        // The planner thread has already waited for the machine (see
+        // `stream`); without an answer (none was asked) read as offline.
+        let answer = self
+            .0
+            .input_answer
+            .lock()
+            .expect("input lock poisoned")
+            .take();
+        answer.unwrap_or_else(|| Offline::default().wait_input(index, digital, mode, timeout, prev))
+    }
 }
 
 /// Keep a tool table entry a program or MDI line set (G10 L1/L10/L11) in
@@ -1831,9 +1849,35 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
             failure = Some(format!("{e} (the file changed after it was checked?)"));
             break;
         }
+        // An M66: the servo answers once the tool has reached it; the
+        // interpreter reads the answer (#5399) before its next line.
+        let answered = shared.status.read().inputs_answered;
         while let Some(segment) = planner.next_segment() {
             if !push(&mut feed, segment, Some(&cancel)) {
                 break 'program;
+            }
+        }
+        if matches!(c.cmd, CanonCmd::WaitInput { .. }) {
+            loop {
+                if cancel.load(Ordering::Relaxed) {
+                    break 'program;
+                }
+                let snap = shared.status.read();
+                if snap.inputs_answered > answered {
+                    *shared.input_answer.lock().expect("input lock poisoned") =
+                        Some(snap.input_value);
+                    break;
+                }
+                if let Some(fault) = snap.fault {
+                    failure = Some(format!(
+                        "line {}: stopped waiting for an input (M66): {}",
+                        c.source.line,
+                        fault.describe(&*shared.kins)
+                    ));
+                    break 'program;
+                }
+                // The wait is the program's: poll at the servo's pace.
+                std::thread::sleep(Duration::from_millis(1));
             }
         }
     }

@@ -132,6 +132,10 @@ pub struct Snapshot {
     pub program_done: u32,
     /// Id of the last program that was aborted and flushed (0: none yet).
     pub program_aborted: u32,
+    /// M66 waits answered so far, and the last answer (#5399: 1/0 for a
+    /// digital input, the reading for an analog one, −1 on timeout).
+    pub inputs_answered: u64,
+    pub input_value: f64,
     /// Path speed, mm/s.
     pub velocity: f64,
     /// Feed and rapid override factors in force.
@@ -177,6 +181,8 @@ impl Snapshot {
             moving: false,
             line: 0,
             program_done: 0,
+            inputs_answered: 0,
+            input_value: 0.0,
             program_aborted: 0,
             velocity: 0.0,
             feed_override: 1.0,
@@ -230,6 +236,8 @@ pub struct ServoTick {
     /// The head segment's synchronised outputs have been applied (its
     /// motion started in an earlier tick).
     head_outputs_done: bool,
+    /// The M66 wait at the head of the queue, while it waits.
+    input_wait: Option<kerf_io::pins::InputWait>,
     /// Position loops of the joints (their output drives plants that take
     /// an effort; position drives ignore it).
     loops: JointLoops,
@@ -282,6 +290,7 @@ impl ServoTick {
             export: None,
             pins: PinBank::new(&kerf_io::PinConfig::default()),
             head_outputs_done: false,
+            input_wait: None,
             loops: JointLoops::new(&[LoopGains::SEED; MAX_JOINTS][..n], &joints[..n]),
             spindle_rpm: 0.0,
             force: None,
@@ -365,7 +374,8 @@ impl ServoTick {
     }
 
     /// True once everything the executor needs ahead is queued: the queue
-    /// is empty, full, or holds a `Stop` marker (the rest of a program).
+    /// is empty, full, or holds a `Stop` marker (the rest of a program) or
+    /// an M66 wait (the planner waits for its answer).
     /// A servo on a virtual clock waits for this before each tick, so a
     /// run does not depend on how fast the planner thread is.
     pub fn input_complete(&mut self) -> bool {
@@ -379,7 +389,9 @@ impl ServoTick {
         let (head, tail) = chunk.as_slices();
         head.iter()
             .chain(tail)
-            .any(|s| matches!(s.kind, SegmentKind::Stop { .. }))
+            // A Stop ends the program; nothing follows an M66 until the
+            // servo has answered it.
+            .any(|s| matches!(s.kind, SegmentKind::Stop { .. } | SegmentKind::WaitInput(_)))
     }
 
     /// Publish the status and `pins` through `shm` every tick from now on.
@@ -613,6 +625,48 @@ impl ServoTick {
             .read_chunk(self.queue.slots())
             .expect("slots() items are readable");
         let (head, tail) = chunk.as_slices();
+        // An M66 at the head (the tool is at rest there): poll its input
+        // each period and let the executor pass once it answers.
+        match head.first().or(tail.first()).map(|s| s.kind) {
+            Some(SegmentKind::WaitInput(req)) => {
+                let wait = match self.input_wait {
+                    Some(w) => Ok(w),
+                    None => {
+                        let input = if req.digital {
+                            kerf_io::pins::WaitInput::Digital(req.index as usize)
+                        } else {
+                            kerf_io::pins::WaitInput::Analog(req.index as usize)
+                        };
+                        let mode = match req.mode {
+                            1 => kerf_io::pins::WaitMode::Rise,
+                            2 => kerf_io::pins::WaitMode::Fall,
+                            3 => kerf_io::pins::WaitMode::High,
+                            4 => kerf_io::pins::WaitMode::Low,
+                            _ => kerf_io::pins::WaitMode::Immediate,
+                        };
+                        // The planner checked the pin exists; a machine
+                        // without it answers "timed out" rather than hang.
+                        kerf_io::pins::InputWait::new(&self.pins, input, mode, req.timeout)
+                            .map_err(|_| ())
+                    }
+                };
+                let answer = match wait {
+                    Ok(mut w) => {
+                        let answer = w.poll(&self.pins, self.period);
+                        self.input_wait = Some(w);
+                        answer
+                    }
+                    Err(()) => Some(-1.0),
+                };
+                if let Some(value) = answer {
+                    self.input_wait = None;
+                    snap.inputs_answered += 1;
+                    snap.input_value = value;
+                    self.executor.release_input();
+                }
+            }
+            _ => self.input_wait = None,
+        }
         let sample = self.executor.tick(self.period, head, tail);
         // The program's force control changes when a segment that asks for
         // something else starts.

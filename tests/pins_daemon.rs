@@ -73,3 +73,33 @@ fn kerfd_sets_the_pins_a_program_asks_for() {
         "{e}"
     );
 }
+
+#[test]
+fn m66_answers_the_program_from_the_machines_input() {
+    // Input 0 of the simulated mill stays low: waiting for it to go high
+    // times out (#5399 = −1) and the program takes its first branch; read
+    // at once (L0) it answers 0 and the program takes the other. The
+    // offline check before the run reads inputs as 0 either way, so only
+    // a real wait can reach X5.
+    let kerfd = Kerfd::start(&["--virtual-clock"]);
+    let mut client = kerfd.ready_client();
+    for (wait, want) in [("L3 Q0.2", 5.0), ("L0", 7.0)] {
+        let program = kerfd.program(
+            "wait.ngc",
+            &format!(
+                "G21 G90\nM66 P0 {wait}\no100 if [#5399 EQ -1]\nG0 X5\no100 else\nG0 X7\no100 endif\nM2\n"
+            ),
+        );
+        let reply = client
+            .request(&Command::Run {
+                path: Some(program.display().to_string()),
+                line: None,
+            })
+            .unwrap();
+        let id = reply["program"].as_u64().unwrap() as u32;
+        let end = client.wait_job(id, 50.0, |_| {}).unwrap();
+        let p = end.program.as_ref().unwrap();
+        assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);
+        assert_eq!(support::axis(&end, "x"), want, "M66 {wait}");
+    }
+}

@@ -388,6 +388,32 @@ pub trait Environment {
         default
     }
 
+    /// M66: the value of #5399 after waiting on input `index` (digital or
+    /// analog) in `mode` (0 now, 1 rise, 2 fall, 3 high, 4 low) for at most
+    /// `timeout` seconds: 1/0 for a digital input, the reading for an
+    /// analog one, −1 on timeout. `previous` is #5399 before. A machine
+    /// waits for real; by default the input is read at once
+    /// ([`Environment::digital_input`], [`Environment::analog_input`]), as
+    /// LinuxCNC's stand-alone interpreter does.
+    fn wait_input(
+        &mut self,
+        index: u32,
+        digital: bool,
+        _mode: u8,
+        _timeout: f64,
+        previous: f64,
+    ) -> f64 {
+        if digital {
+            if self.digital_input(index, previous != 0.0) {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            self.analog_input(index, previous)
+        }
+    }
+
     /// Store the parameters (all of them, indexed by number) when the
     /// program ends. Only #5161–#5390 need to persist.
     fn save_parameters(&mut self, values: &[f64]) -> Result<(), String> {

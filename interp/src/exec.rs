@@ -483,6 +483,8 @@ impl Interp<'_> {
                         self.input_flag = true;
                         self.input_index = index(p);
                         self.input_digital = true;
+                        self.input_mode = mode as u8;
+                        self.input_timeout = timeout;
                     } else if let Some(e) = e {
                         chk!(
                             comp_on,
@@ -497,6 +499,8 @@ impl Interp<'_> {
                         self.input_flag = true;
                         self.input_index = index(e);
                         self.input_digital = false;
+                        self.input_mode = 0;
+                        self.input_timeout = 0.0;
                     }
                 }
                 67 | 68 => {

@@ -286,6 +286,9 @@ pub(crate) struct Interp<'a> {
     pub input_flag: bool,
     pub input_digital: bool,
     pub input_index: u32,
+    /// M66 wait mode (L word) and longest wait (Q word, seconds).
+    pub input_mode: u8,
+    pub input_timeout: f64,
 
     // ---- parameters ----
     pub params: Box<[f64]>,
@@ -414,6 +417,8 @@ impl<'a> Interp<'a> {
             input_flag: false,
             input_digital: false,
             input_index: 0,
+            input_mode: 0,
+            input_timeout: 0.0,
             params: vec![0.0; PARAMETER_COUNT].into_boxed_slice(),
             labels: HashMap::new(),
             call_level: 0,
@@ -776,15 +781,13 @@ impl<'a> Interp<'a> {
         if self.input_flag {
             self.input_flag = false;
             let prev = self.params[5399];
-            self.params[5399] = if self.input_digital {
-                if self.env.digital_input(self.input_index, prev != 0.0) {
-                    1.0
-                } else {
-                    0.0
-                }
-            } else {
-                self.env.analog_input(self.input_index, prev)
-            };
+            self.params[5399] = self.env.wait_input(
+                self.input_index,
+                self.input_digital,
+                self.input_mode,
+                self.input_timeout,
+                prev,
+            );
         }
     }
 

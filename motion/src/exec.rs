@@ -57,6 +57,8 @@ pub struct Executor {
     step_requested: bool,
     /// The stop being played back, if any.
     brake: Option<Brake>,
+    /// The M66 wait at the head of the queue may be passed.
+    input_released: bool,
 }
 
 /// Two slices read as one queue.
@@ -309,7 +311,14 @@ impl Executor {
             block_line: None,
             step_requested: false,
             brake: None,
+            input_released: false,
         }
+    }
+
+    /// Let the M66 wait at the head of the queue pass on the next tick:
+    /// its input has answered or timed out.
+    pub fn release_input(&mut self) {
+        self.input_released = true;
     }
 
     /// The commanded position after the last tick.
@@ -411,7 +420,10 @@ impl Executor {
                 .max_velocity
                 .min(seg.feed * self.feed_override * self.feed_scale),
             SegmentKind::Rapid => seg.max_velocity * self.rapid_override,
-            SegmentKind::Dwell { .. } | SegmentKind::Stop { .. } | SegmentKind::Output(_) => 0.0,
+            SegmentKind::Dwell { .. }
+            | SegmentKind::Stop { .. }
+            | SegmentKind::Output(_)
+            | SegmentKind::WaitInput(_) => 0.0,
         }
     }
 
@@ -588,6 +600,14 @@ impl Executor {
                     consumed += 1;
                     self.line = seg.line;
                     break;
+                }
+                SegmentKind::WaitInput(_) => {
+                    self.line = seg.line;
+                    if !self.input_released {
+                        break;
+                    }
+                    self.input_released = false;
+                    consumed += 1;
                 }
                 SegmentKind::Dwell { seconds } => {
                     if self.hold || (self.single_block && self.block_line != Some(seg.line)) {

@@ -31,6 +31,6 @@ mod testkit;
 pub use exec::{Executor, Sample};
 pub use kinematics::{AxisSpec, JointSpec, Kinematics, KinematicsError, Limits, MAX_JOINTS};
 pub use plan::{
-    OutputChange, PathMode, PlanError, Planner, PlannerConfig, Segment, SegmentKind, SyncOutputs,
-    MAX_ANALOG_OUTPUTS, MAX_DIGITAL_OUTPUTS,
+    InputRequest, OutputChange, PathMode, PlanError, Planner, PlannerConfig, Segment, SegmentKind,
+    SyncOutputs, MAX_ANALOG_OUTPUTS, MAX_DIGITAL_OUTPUTS,
 };

@@ -364,6 +364,9 @@ pub fn run(
             }
         }
         let (a, b) = queue.as_slices();
+        // Offline, an M66 reads its input at once (the interpreter's
+        // offline environment answers it), so a wait never holds.
+        executor.release_input();
         let sample = executor.tick(dt, a, b);
         queue.drain(..sample.consumed);
         ticks += 1;

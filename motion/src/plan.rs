@@ -31,6 +31,23 @@ pub enum SegmentKind {
     /// rest. LinuxCNC's task also waits for motion to finish before an
     /// immediate output, so the change lands in program order.
     Output(OutputChange),
+    /// M66: wait here, at rest, until the input answers or the wait times
+    /// out. Whoever runs the executor polls the input and then calls
+    /// [`Executor::release_input`](crate::Executor::release_input).
+    WaitInput(InputRequest),
+}
+
+/// What an M66 waits for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InputRequest {
+    /// Input number.
+    pub index: u8,
+    /// Digital (P word) or analog (E word).
+    pub digital: bool,
+    /// 0 now, 1 rise, 2 fall, 3 high, 4 low (L word).
+    pub mode: u8,
+    /// Longest wait, seconds (Q word).
+    pub timeout: f64,
 }
 
 /// One output change of M64/M65 (digital) or M68 (analog).
@@ -191,6 +208,10 @@ pub struct PlannerConfig {
     pub digital_outputs: usize,
     /// Analog outputs the machine has (M67/M68 E must be below).
     pub analog_outputs: usize,
+    /// Digital and analog inputs the machine has (M66 P and E must be
+    /// below).
+    pub digital_inputs: usize,
+    pub analog_inputs: usize,
 }
 
 impl Default for PlannerConfig {
@@ -203,6 +224,8 @@ impl Default for PlannerConfig {
             default_tolerance: 0.01,
             digital_outputs: MAX_DIGITAL_OUTPUTS,
             analog_outputs: MAX_ANALOG_OUTPUTS,
+            digital_inputs: MAX_DIGITAL_OUTPUTS,
+            analog_inputs: MAX_ANALOG_OUTPUTS,
         }
     }
 }
@@ -433,7 +456,40 @@ impl<'k> Planner<'k> {
             CanonCmd::StartSpeedFeedSync { .. } => {
                 return unsupported("spindle-synchronised motion (G33, G76)")
             }
-            CanonCmd::WaitInput { .. } => return unsupported("waiting on an input (M66)"),
+            CanonCmd::WaitInput {
+                index,
+                digital,
+                mode,
+                timeout,
+            } => {
+                let (count, kind, key) = if *digital {
+                    (self.config.digital_inputs, "digital", "digital_in")
+                } else {
+                    (self.config.analog_inputs, "analog", "analog_in")
+                };
+                let index = match u8::try_from(*index) {
+                    Ok(n) if (n as usize) < count => n,
+                    _ => {
+                        return Err(self.error(
+                            canon,
+                            format!(
+                                "M66: no {kind} input {index}: the machine has {count} ([hal.pins] {key})"
+                            ),
+                        ))
+                    }
+                };
+                self.finish();
+                self.ready.push_back(Segment::marker(
+                    SegmentKind::WaitInput(InputRequest {
+                        index,
+                        digital: *digital,
+                        mode: *mode,
+                        timeout: *timeout,
+                    }),
+                    line,
+                    self.position,
+                ));
+            }
             CanonCmd::SetMotionOutputBit { index } => {
                 let n = self.digital_output(canon, *index)?;
                 self.sync_outputs.set_digital(n, true);
