@@ -19,8 +19,8 @@ use kerf_machines::Description;
 use kerf_motion::control::{JointLoops, LoopGains};
 use kerf_motion::fuzzy::{self, ForceControl};
 use kerf_motion::{
-    Executor, Kinematics, KinematicsError, OutputChange, Segment, SegmentKind, MAX_ANALOG_OUTPUTS,
-    MAX_DIGITAL_OUTPUTS, MAX_JOINTS,
+    Executor, InputRequest, Kinematics, KinematicsError, OutputChange, Segment, SegmentKind,
+    MAX_ANALOG_OUTPUTS, MAX_DIGITAL_OUTPUTS, MAX_JOINTS,
 };
 
 use crate::latency::{LatencyHistogram, LatencyStats};
@@ -630,33 +630,18 @@ impl ServoTick {
         match head.first().or(tail.first()).map(|s| s.kind) {
             Some(SegmentKind::WaitInput(req)) => {
                 let wait = match self.input_wait {
-                    Some(w) => Ok(w),
-                    None => {
-                        let input = if req.digital {
-                            kerf_io::pins::WaitInput::Digital(req.index as usize)
-                        } else {
-                            kerf_io::pins::WaitInput::Analog(req.index as usize)
-                        };
-                        let mode = match req.mode {
-                            1 => kerf_io::pins::WaitMode::Rise,
-                            2 => kerf_io::pins::WaitMode::Fall,
-                            3 => kerf_io::pins::WaitMode::High,
-                            4 => kerf_io::pins::WaitMode::Low,
-                            _ => kerf_io::pins::WaitMode::Immediate,
-                        };
-                        // The planner checked the pin exists; a machine
-                        // without it answers "timed out" rather than hang.
-                        kerf_io::pins::InputWait::new(&self.pins, input, mode, req.timeout)
-                            .map_err(|_| ())
-                    }
+                    Some(w) => Some(w),
+                    None => start_input_wait(&self.pins, req),
                 };
                 let answer = match wait {
-                    Ok(mut w) => {
+                    Some(mut w) => {
                         let answer = w.poll(&self.pins, self.period);
                         self.input_wait = Some(w);
                         answer
                     }
-                    Err(()) => Some(-1.0),
+                    // The planner checked the pin; a machine without it
+                    // answers "timed out" rather than hang.
+                    None => Some(-1.0),
                 };
                 if let Some(value) = answer {
                     self.input_wait = None;
@@ -717,6 +702,31 @@ impl ServoTick {
             Err(e) => snap.fault = Some(ServoFault::Kinematics(e)),
         }
     }
+}
+
+/// The wait an M66 asks for, if this machine has its input. Checked here
+/// rather than left to `InputWait::new`, whose error message would
+/// allocate inside the tick.
+fn start_input_wait(pins: &PinBank, req: InputRequest) -> Option<kerf_io::pins::InputWait> {
+    use kerf_io::pins::{InputWait, WaitInput, WaitMode};
+    let (_, digital_in, _, analog_in) = pins.counts();
+    let n = req.index as usize;
+    let input = match req.digital {
+        true if n < digital_in => WaitInput::Digital(n),
+        false if n < analog_in && req.mode == 0 => WaitInput::Analog(n),
+        _ => return None,
+    };
+    if !(req.timeout >= 0.0 && req.timeout.is_finite()) {
+        return None;
+    }
+    let mode = match req.mode {
+        1 => WaitMode::Rise,
+        2 => WaitMode::Fall,
+        3 => WaitMode::High,
+        4 => WaitMode::Low,
+        _ => WaitMode::Immediate,
+    };
+    InputWait::new(pins, input, mode, req.timeout).ok()
 }
 
 /// Set the outputs `seg` changes: an immediate output marker's, or the

@@ -53,8 +53,9 @@ fn ticks_through_a_program_without_allocating() {
     let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
 
     // With outputs on the way: synchronised ones riding on moves (M62,
-    // M67) and immediate ones as queue markers (M64, M65, M68).
-    let program = "G21 G90 G0 X50 Y40 Z-10\nM62 P0\nM67 E0 Q1.5\nG1 X80 F900\nY60\nM64 P1\nX70 Y70\nG4 P0.05\nM68 E1 Q2\nG20 G91 G1 Y1 Z-0.1\nM63 P0\nM65 P1\nG0 X-1\nM2\n";
+    // M67) and immediate ones as queue markers (M64, M65, M68), and an
+    // input read at rest (M66).
+    let program = "G21 G90 G0 X50 Y40 Z-10\nM62 P0\nM67 E0 Q1.5\nG1 X80 F900\nY60\nM64 P1\nX70 Y70\nG4 P0.05\nM68 E1 Q2\nM66 P0 L0\nM66 P1 L3 Q0.01\nG20 G91 G1 Y1 Z-0.1\nM63 P0\nM65 P1\nG0 X-1\nM2\n";
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
     for canon in Interpreter::from_text(program, "rt.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();
@@ -111,6 +112,8 @@ fn ticks_through_a_program_without_allocating() {
     let pins = tick.pins();
     assert_eq!(pins.digital_outputs(), 0, "M63 and M65 turned both off");
     assert_eq!((pins.analog_out(0), pins.analog_out(1)), (1.5, 2.0));
+    // Both waits answered: input 1 never went high, so the last timed out.
+    assert_eq!((snap.inputs_answered, snap.input_value), (2, -1.0));
 }
 
 /// Every embedded machine's inverse and forward kinematics, called as the
