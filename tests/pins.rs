@@ -15,11 +15,20 @@ struct Period {
     velocity: f64,
     digital: u64,
     analog: [f64; 2],
+    /// M66 waits answered so far, and the last answer.
+    inputs_answered: u64,
+    input_value: f64,
 }
 
 /// Plan `program` on mill3 (with its `[hal.pins]`), run it to its end and
 /// return every period.
 fn run(program: &str) -> Vec<Period> {
+    run_with_input(program, |_| false)
+}
+
+/// As [`run`], with digital input 0 set by `input` in each period (by
+/// period number).
+fn run_with_input(program: &str, input: impl Fn(usize) -> bool) -> Vec<Period> {
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = machine.kinematics.clone();
     let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
@@ -57,7 +66,8 @@ fn run(program: &str) -> Vec<Period> {
     tick.set_pins(kerf_io::PinBank::new(&hal_config.pins));
     commands.push(ServoCommand::Enable(true)).unwrap();
     let mut periods = Vec::new();
-    for _ in 0..100_000 {
+    for n in 0..100_000 {
+        tick.pins_mut().store_digital_in(0, input(n));
         let snap: Snapshot = *tick.tick();
         let pins = tick.pins();
         periods.push(Period {
@@ -65,6 +75,8 @@ fn run(program: &str) -> Vec<Period> {
             velocity: snap.velocity,
             digital: pins.digital_outputs(),
             analog: [pins.analog_out(0), pins.analog_out(1)],
+            inputs_answered: snap.inputs_answered,
+            input_value: snap.input_value,
         });
         if snap.program_done == 1 {
             return periods;
@@ -161,53 +173,6 @@ fn output_numbers_are_checked_against_the_machine_when_planned() {
     );
 }
 
-/// Run `program` on mill3 with its pins; `input` sets digital input 0 in
-/// each period (by period number). Each period's commanded X, speed and
-/// M66 answers so far.
-fn run_with_input(program: &str, input: impl Fn(usize) -> bool) -> Vec<(f64, f64, u64, f64)> {
-    let machine = kerf_machines::load("mill3").unwrap();
-    let kins = machine.kinematics.clone();
-    let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
-    let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
-    let (mut producer, consumer) = rtrb::RingBuffer::new(1024);
-    let (mut commands, command_queue) = rtrb::RingBuffer::new(16);
-    let config = PlannerConfig {
-        digital_inputs: hal_config.pins.digital_in.len(),
-        ..PlannerConfig::default()
-    };
-    let mut planner = Planner::new(&*kins, Position::ZERO, config);
-    for canon in Interpreter::from_text(program, "wait.ngc", Position::ZERO) {
-        planner.plan(&canon.unwrap()).unwrap();
-    }
-    planner.finish();
-    while let Some(seg) = planner.next_segment() {
-        producer.push(seg).unwrap();
-    }
-    let end = planner.position();
-    producer
-        .push(Segment::marker(SegmentKind::Stop { tag: 1 }, 0, end))
-        .unwrap();
-    let mut tick =
-        ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
-    tick.set_pins(kerf_io::PinBank::new(&hal_config.pins));
-    commands.push(ServoCommand::Enable(true)).unwrap();
-    let mut periods = Vec::new();
-    for n in 0..100_000 {
-        tick.pins_mut().store_digital_in(0, input(n));
-        let snap: Snapshot = *tick.tick();
-        periods.push((
-            snap.commanded.x,
-            snap.velocity,
-            snap.inputs_answered,
-            snap.input_value,
-        ));
-        if snap.program_done == 1 {
-            return periods;
-        }
-    }
-    panic!("the program did not finish");
-}
-
 #[test]
 fn m66_holds_the_tool_until_the_input_goes_high() {
     // The input rises in period 3000, long after the tool reached X10
@@ -216,16 +181,25 @@ fn m66_holds_the_tool_until_the_input_goes_high() {
     let p = run_with_input("G21 G90 G1 X10 F600\nM66 P0 L3 Q10\nG1 X20\nM2\n", |n| {
         n >= 3000
     });
-    let answered = p.iter().position(|q| q.2 == 1).expect("never answered");
+    let answered = p
+        .iter()
+        .position(|q| q.inputs_answered == 1)
+        .expect("never answered");
     assert_eq!(answered, 3000);
-    assert_eq!(p[answered].3, 1.0);
-    let arrived = p.iter().position(|q| (q.0 - 10.0).abs() < 1e-12).unwrap();
+    assert_eq!(p[answered].input_value, 1.0);
+    let arrived = p
+        .iter()
+        .position(|q| (q.commanded.x - 10.0).abs() < 1e-12)
+        .unwrap();
     assert!(arrived < 2000, "{arrived}");
     for q in &p[arrived..answered] {
-        assert!((q.0 - 10.0).abs() < 1e-12 && q.1 == 0.0, "{q:?}");
+        assert!(
+            (q.commanded.x - 10.0).abs() < 1e-12 && q.velocity == 0.0,
+            "{q:?}"
+        );
     }
-    assert!(p[answered].0 > 10.0);
-    assert!((p.last().unwrap().0 - 20.0).abs() < 1e-9);
+    assert!(p[answered].commanded.x > 10.0);
+    assert!((p.last().unwrap().commanded.x - 20.0).abs() < 1e-9);
 }
 
 #[test]
@@ -235,10 +209,16 @@ fn m66_times_out_with_minus_one_and_the_program_goes_on() {
     let p = run_with_input("G21 G90 G1 X10 F600\nM66 P0 L3 Q0.5\nG1 X20\nM2\n", |_| {
         false
     });
-    let arrived = p.iter().position(|q| (q.0 - 10.0).abs() < 1e-12).unwrap();
-    let answered = p.iter().position(|q| q.2 == 1).expect("never answered");
-    assert_eq!(p[answered].3, -1.0);
+    let arrived = p
+        .iter()
+        .position(|q| (q.commanded.x - 10.0).abs() < 1e-12)
+        .unwrap();
+    let answered = p
+        .iter()
+        .position(|q| q.inputs_answered == 1)
+        .expect("never answered");
+    assert_eq!(p[answered].input_value, -1.0);
     let waited = (answered - arrived) as f64 * 0.001;
     assert!((waited - 0.5).abs() <= 0.003, "waited {waited} s");
-    assert!((p.last().unwrap().0 - 20.0).abs() < 1e-9);
+    assert!((p.last().unwrap().commanded.x - 20.0).abs() < 1e-9);
 }
