@@ -310,14 +310,7 @@ impl Blend {
         let q = &self.control;
         let w = 1.0 - u;
         let (u2, w2) = (u * u, w * w);
-        let b5 = [
-            w2 * w2 * w,
-            5.0 * u * w2 * w2,
-            10.0 * u2 * w2 * w,
-            10.0 * u2 * u * w2,
-            5.0 * u2 * u2 * w,
-            u2 * u2 * u,
-        ];
+        let b5 = bernstein5(u);
         let b4 = [
             w2 * w2,
             4.0 * u * w2 * w,
@@ -342,16 +335,7 @@ impl Blend {
     /// Point at Bézier parameter `u` (X Y Z vary, as in [`derivatives`]).
     pub fn point_at_parameter(&self, u: f64) -> Vec9 {
         let q = &self.control;
-        let w = 1.0 - u;
-        let (u2, w2) = (u * u, w * w);
-        let b5 = [
-            w2 * w2 * w,
-            5.0 * u * w2 * w2,
-            10.0 * u2 * w2 * w,
-            10.0 * u2 * u * w2,
-            5.0 * u2 * u2 * w,
-            u2 * u2 * u,
-        ];
+        let b5 = bernstein5(u);
         let mut p = q[0];
         for i in 0..3 {
             p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
@@ -513,6 +497,20 @@ impl Shape {
             curvature: k,
         }
     }
+}
+
+/// The six quintic Bernstein polynomials at `u`.
+fn bernstein5(u: f64) -> [f64; 6] {
+    let w = 1.0 - u;
+    let (u2, w2) = (u * u, w * w);
+    [
+        w2 * w2 * w,
+        5.0 * u * w2 * w2,
+        10.0 * u2 * w2 * w,
+        10.0 * u2 * u * w2,
+        5.0 * u2 * u2 * w,
+        u2 * u2 * u,
+    ]
 }
 
 #[cfg(test)]
