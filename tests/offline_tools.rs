@@ -187,14 +187,13 @@ fn joints_stay_within_their_limits_on_the_5_axis_platform() {
     assert!(all <= 1.0 + 1e-6, "limit use {all}");
 }
 
-/// Known bug (docs/motion.md): three lines from stellabee1.ngc (an XZ
-/// profile, inches) on mill3. The blend into the steep last line has half
-/// the acceleration and a third of the jerk of the line after it; the look
-/// ahead, which aims one profile under one acceleration limit, enters the
-/// last line too fast to stop in it and snaps to rest (limit use ≈ 340).
-/// Run with `cargo test --test offline_tools -- --ignored` until fixed.
+/// Three lines from stellabee1.ngc (an XZ profile, inches) on mill3. The
+/// blend into the steep last line has half the acceleration and a third of
+/// the jerk of the line after it. The look ahead used to stop scanning
+/// where a stop under the current line's limits would end, so it met the
+/// slow blend only once too close to brake under its limits, and the
+/// motion entered the last line too fast to stop in it (limit use ≈ 340).
 #[test]
-#[ignore = "known bug: final stop after a blend with lower limits than the line after it"]
 fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
     let dir = tempfile::tempdir().unwrap();
     let p = program(
@@ -203,6 +202,34 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
         "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18\nF999\n\
          G0 X0.4200 Y2.4420 Z-0.1859\nG1 X0.4260 Z-0.1755\nX0.4300 Z-0.0726\n\
          X0.4360 Z-0.0049\nM2\n",
+    );
+    let out = kerf(&["plan", &p, "--json"]);
+    assert!(out.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let ratio = json["max_limit_ratio"].as_f64().unwrap();
+    assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
+}
+
+/// Known bug (docs/motion.md): a stretch of stellabee1.ngc where a line is
+/// followed by two blends with ever lower limits and a stop. The executor
+/// aims one braking profile at a time; re-aiming between the near cap
+/// (which it must reach with zero acceleration) and the far one lets the
+/// speed drift above what the slowest blend allows, and it enters that
+/// blend decelerating harder than its limit (jerk use 1.66).
+/// Run with `cargo test --test offline_tools -- --ignored` until fixed.
+#[test]
+#[ignore = "known bug: chained caps with falling limits before a stop (docs/motion.md)"]
+fn two_blends_with_falling_limits_before_a_stop_stay_within_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(
+        &dir,
+        "falling.ngc",
+        "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18 G94\nF999\n\
+         G0 X1.1240 Z-0.2203\nG1 X1.1200 Z-0.2291\nX1.1120 Z-0.2314\nX1.1100 Z-0.2304\n\
+         G3 X1.1060 Y0.6020 Z-0.1941 I0.2535 K0.0463\n\
+         G3 X1.1020 Y0.6020 Z-0.1069 I1.9066 K0.1311\n\
+         G1 X1.1000 Z-0.1059\nX1.0960 Z-0.1069\nX1.0940 Z-0.1255\nX1.0920 Z-0.1932\n\
+         X1.0900 Z-0.1980\nX1.0880 Z-0.1990\nM2\n",
     );
     let out = kerf(&["plan", &p, "--json"]);
     assert!(out.status.success());

@@ -59,6 +59,8 @@ pub struct Executor {
     brake: Option<Brake>,
     /// The M66 wait at the head of the queue may be passed.
     input_released: bool,
+    /// Servo period of the last tick, s.
+    period: f64,
 }
 
 /// Two slices read as one queue.
@@ -118,6 +120,59 @@ pub fn braking_distance(v: f64, a: f64, target: f64, amax: f64, jmax: f64) -> f6
     let total = (v0 + target) / 2.0 * total_time;
     let behind = v0 * t0 - jt3(t0) / 6.0;
     dist + (total - behind).max(0.0)
+}
+
+/// The farthest a cap can be and still need braking now: the longest
+/// [`braking_distance`] over all target speeds below `v`.
+///
+/// Arriving at a cap with zero acceleration is not monotonic in the cap: a
+/// jerk-limited profile must start easing its deceleration A²/(2J) above
+/// its target, so reaching a moderate speed that way can take longer than
+/// stopping. The distance, as a function of the target, peaks at A²/(2J)
+/// (profiles that reach full deceleration) or at a third of the starting
+/// speed (profiles that do not); a cap farther away than all of them can
+/// always be met later.
+fn approach_reach(v: f64, a: f64, amax: f64, jmax: f64) -> f64 {
+    let crest = v + a * a.abs() / (2.0 * jmax);
+    let knee = if jmax.is_finite() {
+        amax * amax / (2.0 * jmax)
+    } else {
+        0.0
+    };
+    [0.0, knee, crest / 3.0, v / 3.0]
+        .into_iter()
+        .filter(|&t| t < v.max(crest))
+        .map(|t| braking_distance(v, a, t, amax, jmax))
+        .fold(0.0, f64::max)
+}
+
+/// Segments this far past the end of a look ahead's reach are searched for
+/// lower limits that would extend it.
+const LOOK_PAST_REACH: usize = 64;
+
+/// Whether a segment among the next [`LOOK_PAST_REACH`] from `k` (which
+/// starts `dist` ahead) has limits low enough that braking under them would
+/// reach it: a look ahead that stopped at `k` would see it only once
+/// already too close to slow down for it under those limits.
+fn slower_ahead(q: View, k: usize, dist: f64, v: f64, a: f64, amax: f64, jmax: f64) -> bool {
+    let (mut amax, mut jmax, mut start) = (amax, jmax, dist);
+    for i in k..k + LOOK_PAST_REACH {
+        let Some(seg) = q.get(i).filter(|s| s.is_motion()) else {
+            return false;
+        };
+        if seg.max_acceleration < amax || seg.max_jerk < jmax {
+            amax = amax.min(seg.max_acceleration);
+            jmax = jmax.min(seg.max_jerk);
+            if start <= approach_reach(v, a, amax, jmax) {
+                return true;
+            }
+        }
+        if seg.exit_velocity == 0.0 {
+            return false;
+        }
+        start += seg.length;
+    }
+    false
 }
 
 /// The acceleration to have at the end of this period so that easing it
@@ -240,6 +295,61 @@ impl Brake {
         Some(best)
     }
 
+    /// [`within`](Self::within), but also no faster than `near.1` where
+    /// it passes `near.0` ahead: re-aiming past a nearer cap must still
+    /// meet it. Gentler profiles pass every point faster, so the gentlest
+    /// peak that meets both is found by bisection; if even the shortest
+    /// profile misses the nearer cap, the shortest one.
+    fn within_meeting(
+        v0: f64,
+        a0: f64,
+        v1: f64,
+        distance: f64,
+        amax: f64,
+        jmax: f64,
+        near: (f64, f64),
+    ) -> Option<Brake> {
+        let gentle = Self::within(v0, a0, v1, distance, amax, jmax)?;
+        let meets = |b: &Brake| b.speed_at_distance(near.0) <= near.1 * (1.0 + 1e-12) + 1e-12;
+        if meets(&gentle) {
+            return Some(gentle);
+        }
+        let shortest = Self::shortest(v0, a0, v1, amax, jmax)?;
+        if !meets(&shortest) {
+            return Some(shortest);
+        }
+        let (mut lo, mut hi) = (gentle.peak(), shortest.peak());
+        let mut best = shortest;
+        for _ in 0..40 {
+            let mid = (lo + hi) / 2.0;
+            match Self::with_peak(v0, a0, v1, mid, jmax) {
+                Some(b) if meets(&b) => {
+                    hi = mid;
+                    best = b;
+                }
+                _ => lo = mid,
+            }
+        }
+        Some(best)
+    }
+
+    /// Speed where the profile passes `distance` ahead of its start, mm/s.
+    fn speed_at_distance(&self, distance: f64) -> f64 {
+        let (mut lo, mut hi) = (0.0, self.duration());
+        if self.at(hi).0 <= distance {
+            return self.v1;
+        }
+        for _ in 0..50 {
+            let mid = (lo + hi) / 2.0;
+            if self.at(mid).0 < distance {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        self.at(hi).1
+    }
+
     fn duration(&self) -> f64 {
         self.phases.iter().map(|p| p.1).sum()
     }
@@ -312,6 +422,7 @@ impl Executor {
             step_requested: false,
             brake: None,
             input_released: false,
+            period: 0.001,
         }
     }
 
@@ -452,7 +563,7 @@ impl Executor {
         let mut amax = first.max_acceleration;
         let mut jmax = first.max_jerk;
         let mut dist = -s_head;
-        let mut stop_reach = braking_distance(v, a, 0.0, amax, jmax);
+        let mut stop_reach = approach_reach(v, a, amax, jmax);
         let excepted = |dist: f64, limit: f64| {
             except.is_some_and(|(d, l)| {
                 (d - dist).abs() <= 1e-6 * dist.abs().max(1.0)
@@ -495,24 +606,31 @@ impl Executor {
                 // The queue ends, or a dwell or stop: speed must be zero here.
                 None => true,
                 Some(seg) => {
-                    if dist > stop_reach {
+                    if dist > stop_reach && !slower_ahead(q, k, dist, v, a, amax, jmax) {
                         break None;
                     }
-                    if k > head && a > seg.max_acceleration {
-                        let t = (a - seg.max_acceleration) / jmax;
-                        let ease = if t > 0.0 {
-                            v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0
-                        } else {
-                            0.0
-                        };
-                        if ease > dist + 1e-12 {
+                    if k > head && a.abs() > seg.max_acceleration {
+                        // The acceleration must be within this segment's
+                        // limit by its start: ease it there with jerk J.
+                        let t = (a.abs() - seg.max_acceleration) / jmax;
+                        let j = -jmax * a.signum();
+                        // One period more: the motion steps whole periods,
+                        // and a segment counts once this period can reach it.
+                        let ease = v * t
+                            + a * t * t / 2.0
+                            + j * t * t * t / 6.0
+                            + (v + a.max(0.0) * t) * self.period;
+                        // Braking that comes to rest before the segment
+                        // never enters it.
+                        let rests = a < 0.0 && v + a * t + j * t * t / 2.0 <= 0.0;
+                        if ease > dist + 1e-12 && !rests {
                             return Ahead::blocked();
                         }
                     }
                     if seg.max_acceleration < amax || seg.max_jerk < jmax {
                         amax = amax.min(seg.max_acceleration);
                         jmax = jmax.min(seg.max_jerk);
-                        stop_reach = braking_distance(v, a, 0.0, amax, jmax);
+                        stop_reach = approach_reach(v, a, amax, jmax);
                     }
                     dist += seg.length;
                     let next_cap = q
@@ -571,6 +689,7 @@ impl Executor {
     /// `consumed` items of the returned sample.
     pub fn tick(&mut self, dt: f64, head: &[Segment], tail: &[Segment]) -> Sample {
         let q = View { head, tail };
+        self.period = dt;
         let mut consumed = 0;
         let mut stopped_at = None;
         let mut moving = false;
@@ -763,7 +882,10 @@ impl Executor {
                     self.look_ahead_except(q, head, self.s + (s1 - s0), v1, a1, Some((left, p.v1)));
                 if let (false, Some(b)) = (check.ok, check.binding) {
                     let dist = b.dist + (s1 - s0);
-                    self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                    let old_target = (p.length() - s0, p.v1);
+                    self.brake = Brake::within_meeting(
+                        self.v, self.a, b.limit, dist, b.amax, b.jmax, old_target,
+                    );
                 }
                 self.aim_past_end(q, head);
             } else if let Some(b) = ahead
@@ -868,7 +990,10 @@ impl Executor {
             match (after.ok, after.binding) {
                 (false, Some(b)) => {
                     let dist = b.dist + to_end;
-                    self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                    let old_target = (p.length() - p.at(p.t).0, p.v1);
+                    self.brake = Brake::within_meeting(
+                        self.v, self.a, b.limit, dist, b.amax, b.jmax, old_target,
+                    );
                 }
                 _ => return,
             }
@@ -987,6 +1112,42 @@ mod tests {
         // Starting mid-profile (already at −A) needs less distance.
         let a = braking_distance(100.0, -1000.0, 0.0, 1000.0, 1e5);
         assert!(a < 5.5 && a > 5.0 - 1e-9, "{a}");
+    }
+
+    #[test]
+    fn approaching_a_moderate_speed_can_take_longer_than_stopping() {
+        // From 40 mm/s at rest acceleration, A = 500, J = 16 667: a profile
+        // that ends at v1 with zero acceleration covers (v0² − v1²)/(2A) +
+        // (v0 + v1)·A/(2J), which grows with v1 up to v1 = A²/(2J) = 7.5.
+        let (v0, amax, jmax) = (40.0, 500.0, 500.0 * 500.0 / 15.0);
+        let closed = |v1: f64| (v0 * v0 - v1 * v1) / (2.0 * amax) + (v0 + v1) * amax / (2.0 * jmax);
+        for v1 in [0.0, 5.0, 7.5, 10.0] {
+            let d = braking_distance(v0, 0.0, v1, amax, jmax);
+            assert!(
+                (d - closed(v1)).abs() < 1e-9,
+                "v1 {v1}: {d} vs {}",
+                closed(v1)
+            );
+        }
+        assert!(
+            braking_distance(v0, 0.0, 7.5, amax, jmax) > braking_distance(v0, 0.0, 0.0, amax, jmax)
+        );
+        // The look ahead's reach covers the longest of them.
+        let reach = approach_reach(v0, 0.0, amax, jmax);
+        assert!(
+            (reach - closed(7.5)).abs() < 1e-9,
+            "{reach} vs {}",
+            closed(7.5)
+        );
+        // Without full deceleration the longest approach ends at v0/3.
+        let (v0, amax) = (5.0, 500.0);
+        let short = |v1: f64| (v0 + v1) * ((v0 - v1) / jmax).sqrt();
+        let reach = approach_reach(v0, 0.0, amax, jmax);
+        assert!(
+            (reach - short(v0 / 3.0)).abs() < 1e-9,
+            "{reach} vs {}",
+            short(v0 / 3.0)
+        );
     }
 
     #[test]
@@ -1231,7 +1392,8 @@ mod simulation {
         }
         text += "M2\n";
         let mut q = planned(&text, PathMode::Blend { tolerance });
-        limit_use(&run(&mut q, |_, _| {}))
+        let out = run(&mut q, |_, _| {});
+        limit_use(&out)
     }
 
     #[test]
@@ -1253,14 +1415,13 @@ mod simulation {
         }
     }
 
-    /// Known bug: with chords much shorter than the tolerance (0.031 mm
-    /// chords, P0.05: every line consumed by blends) the look ahead meets
-    /// the program's final stop too late — the last period snaps from
-    /// 1.8 mm/s to rest (acceleration 1.3, jerk about 12 times the limit).
-    /// Kept here, run with `cargo test -p kerf-motion -- --ignored`, until
-    /// it is fixed.
+    /// Chords much shorter than the tolerance (0.031 mm chords, P0.05):
+    /// blends consume every line, their limits vary from one to the next,
+    /// and the final stop comes after a slow blend. This used to snap from
+    /// 1.8 mm/s to rest (jerk 12 times the limit): the look ahead stopped
+    /// scanning where a stop would end, but approaching a moderate cap with
+    /// zero acceleration can take longer than stopping.
     #[test]
-    #[ignore = "known bug: final stop after chords much shorter than the tolerance (docs/motion.md)"]
     fn a_circle_of_chords_shorter_than_the_tolerance_ends_within_limits() {
         let (v, a, j) = dense_circle(4000, 3000.0, 0.05);
         assert!(
