@@ -210,15 +210,13 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
     assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
 }
 
-/// Known bug (docs/motion.md): a stretch of stellabee1.ngc where a line is
-/// followed by two blends with ever lower limits and a stop. The executor
-/// aims one braking profile at a time; re-aiming between the near cap
-/// (which it must reach with zero acceleration) and the far one lets the
-/// speed drift above what the slowest blend allows, and it enters that
-/// blend decelerating harder than its limit (jerk use 1.66).
-/// Run with `cargo test --test offline_tools -- --ignored` until fixed.
+/// A stretch of stellabee1.ngc where a line is followed by two blends with
+/// ever lower limits and a stop. Aiming one zero-acceleration profile at a
+/// time, the executor used to re-aim between the near cap and the far one
+/// and enter the slowest blend decelerating harder than it allows (jerk
+/// use 1.66); now a cap also counts as met when braking at once passes it
+/// below its speed, and the jerk search does that braking.
 #[test]
-#[ignore = "known bug: chained caps with falling limits before a stop (docs/motion.md)"]
 fn two_blends_with_falling_limits_before_a_stop_stay_within_limits() {
     let dir = tempfile::tempdir().unwrap();
     let p = program(

@@ -146,6 +146,20 @@ fn approach_reach(v: f64, a: f64, amax: f64, jmax: f64) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Whether the shortest stop from (`v`, `a`) under `amax` and `jmax`
+/// passes `dist` ahead at no more than `limit` (counting what a positive
+/// acceleration still adds) and with an acceleration within `amax` either
+/// way, so that it may go on into the next segment.
+fn passes_below(v: f64, a: f64, limit: f64, dist: f64, amax: f64, jmax: f64) -> bool {
+    jmax.is_finite()
+        && Brake::shortest(v, a, 0.0, amax, jmax).is_some_and(|stop| {
+            let (speed, acceleration) = stop.state_at_distance(dist);
+            // Still speeding up there, it would overshoot the cap after.
+            within_cap(speed, acceleration, limit, jmax)
+                && acceleration.abs() <= amax * (1.0 + 1e-12)
+        })
+}
+
 /// Segments this far past the end of a look ahead's reach are searched for
 /// lower limits that would extend it.
 const LOOK_PAST_REACH: usize = 64;
@@ -295,59 +309,57 @@ impl Brake {
         Some(best)
     }
 
-    /// [`within`](Self::within), but also no faster than `near.1` where
-    /// it passes `near.0` ahead: re-aiming past a nearer cap must still
-    /// meet it. Gentler profiles pass every point faster, so the gentlest
-    /// peak that meets both is found by bisection; if even the shortest
-    /// profile misses the nearer cap, the shortest one.
-    fn within_meeting(
-        v0: f64,
-        a0: f64,
-        v1: f64,
-        distance: f64,
-        amax: f64,
-        jmax: f64,
-        near: (f64, f64),
-    ) -> Option<Brake> {
-        let gentle = Self::within(v0, a0, v1, distance, amax, jmax)?;
-        let meets = |b: &Brake| b.speed_at_distance(near.0) <= near.1 * (1.0 + 1e-12) + 1e-12;
-        if meets(&gentle) {
-            return Some(gentle);
-        }
-        let shortest = Self::shortest(v0, a0, v1, amax, jmax)?;
-        if !meets(&shortest) {
-            return Some(shortest);
-        }
-        let (mut lo, mut hi) = (gentle.peak(), shortest.peak());
-        let mut best = shortest;
-        for _ in 0..40 {
-            let mid = (lo + hi) / 2.0;
-            match Self::with_peak(v0, a0, v1, mid, jmax) {
-                Some(b) if meets(&b) => {
-                    hi = mid;
-                    best = b;
-                }
-                _ => lo = mid,
-            }
-        }
-        Some(best)
+    /// [`within`](Self::within) if it arrives in time, else None: a cap
+    /// that cannot be met with zero acceleration may still be passed below
+    /// it by braking harder at once, which the jerk search does.
+    fn reaching(v0: f64, a0: f64, v1: f64, distance: f64, amax: f64, jmax: f64) -> Option<Brake> {
+        Self::within(v0, a0, v1, distance, amax, jmax)
+            .filter(|b| b.length() <= distance + 1e-9 * distance.max(1.0))
     }
 
-    /// Speed where the profile passes `distance` ahead of its start, mm/s.
-    fn speed_at_distance(&self, distance: f64) -> f64 {
-        let (mut lo, mut hi) = (0.0, self.duration());
-        if self.at(hi).0 <= distance {
-            return self.v1;
-        }
-        for _ in 0..50 {
-            let mid = (lo + hi) / 2.0;
-            if self.at(mid).0 < distance {
-                lo = mid;
-            } else {
-                hi = mid;
+    /// Speed and acceleration where the profile passes `distance` ahead of
+    /// its start.
+    fn state_at_distance(&self, distance: f64) -> (f64, f64) {
+        // Walk the phases to the one the distance falls in, then solve its
+        // cubic s(t) = distance by safeguarded Newton steps (s is
+        // increasing while the speed is positive).
+        let (mut s, mut v, mut a) = (0.0, self.v0, self.a0);
+        for &(j, d) in &self.phases {
+            let at = |t: f64| {
+                (
+                    s + v * t + a * t * t / 2.0 + j * t * t * t / 6.0,
+                    v + a * t + j * t * t / 2.0,
+                )
+            };
+            let (s_end, _) = at(d);
+            if s_end >= distance {
+                let (mut lo, mut hi) = (0.0, d);
+                let mut t = d / 2.0;
+                for _ in 0..60 {
+                    let (st, vt) = at(t);
+                    let err = st - distance;
+                    if err.abs() <= 1e-13 * distance.max(1.0) {
+                        break;
+                    }
+                    if err < 0.0 {
+                        lo = t;
+                    } else {
+                        hi = t;
+                    }
+                    let newton = t - err / vt;
+                    t = if vt > 0.0 && newton > lo && newton < hi {
+                        newton
+                    } else {
+                        (lo + hi) / 2.0
+                    };
+                }
+                return (v + a * t + j * t * t / 2.0, a + j * t);
             }
+            s = s_end;
+            v += a * d + j * d * d / 2.0;
+            a += j * d;
         }
-        self.at(hi).1
+        (self.v1, 0.0)
     }
 
     fn duration(&self) -> f64 {
@@ -648,9 +660,19 @@ impl Executor {
                             .filter(|n| n.is_motion())
                             .map_or(jmax, |n| jmax.min(n.max_jerk));
                         let crest = v + a.max(0.0).powi(2) / (2.0 * jn);
+                        // Braking through the cap enters the next segment
+                        // decelerating: within its limit too.
+                        let an = q
+                            .get(k + 1)
+                            .filter(|n| n.is_motion())
+                            .map_or(amax, |n| amax.min(n.max_acceleration));
+                        // Met if it can be reached with zero acceleration,
+                        // or if braking at once passes it below the cap
+                        // (still slowing down, for a cap beyond it).
                         if limit < crest
                             && braking_distance(v, a, limit, amax, jn) > dist + 1e-9
                             && !excepted(dist, limit)
+                            && !passes_below(v, a, limit, dist - v * self.period, an, jn)
                         {
                             fail(Binding {
                                 dist,
@@ -882,10 +904,7 @@ impl Executor {
                     self.look_ahead_except(q, head, self.s + (s1 - s0), v1, a1, Some((left, p.v1)));
                 if let (false, Some(b)) = (check.ok, check.binding) {
                     let dist = b.dist + (s1 - s0);
-                    let old_target = (p.length() - s0, p.v1);
-                    self.brake = Brake::within_meeting(
-                        self.v, self.a, b.limit, dist, b.amax, b.jmax, old_target,
-                    );
+                    self.brake = Brake::reaching(self.v, self.a, b.limit, dist, b.amax, b.jmax);
                 }
                 self.aim_past_end(q, head);
             } else if let Some(b) = ahead
@@ -896,7 +915,7 @@ impl Executor {
                 // reaches it exactly, with zero acceleration, from here (if
                 // the profile's crest stays within this segment's own cap).
                 let dist = b.dist + ds_track.max(0.0);
-                self.brake = Brake::within(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                self.brake = Brake::reaching(self.v, self.a, b.limit, dist, b.amax, b.jmax);
                 self.aim_past_end(q, head);
             }
             // A profile never takes the speed over the segment's own cap,
@@ -940,8 +959,25 @@ impl Executor {
                 (-amax - self.a) / dt
             };
             let mut lo = j_floor;
-            if ahead_of(lo, self).1.ok {
-                let mut hi = j_track;
+            let mut hi = j_track;
+            let mut found = ahead_of(lo, self).1.ok;
+            if !found {
+                // Braking hardest may still fail: by entering a segment
+                // with a lower acceleration limit decelerating harder than
+                // it allows. Feasible jerks then lie inside the range, not
+                // at its bottom: look for one, from the top.
+                const GRID: usize = 16;
+                for k in (1..GRID).rev() {
+                    let jk = j_floor + (j_track - j_floor) * k as f64 / GRID as f64;
+                    if ahead_of(jk, self).1.ok {
+                        lo = jk;
+                        hi = j_floor + (j_track - j_floor) * (k + 1) as f64 / GRID as f64;
+                        found = true;
+                        break;
+                    }
+                }
+            }
+            if found {
                 for _ in 0..16 {
                     let mid = (lo + hi) / 2.0;
                     if ahead_of(mid, self).1.ok {
@@ -990,10 +1026,7 @@ impl Executor {
             match (after.ok, after.binding) {
                 (false, Some(b)) => {
                     let dist = b.dist + to_end;
-                    let old_target = (p.length() - p.at(p.t).0, p.v1);
-                    self.brake = Brake::within_meeting(
-                        self.v, self.a, b.limit, dist, b.amax, b.jmax, old_target,
-                    );
+                    self.brake = Brake::reaching(self.v, self.a, b.limit, dist, b.amax, b.jmax);
                 }
                 _ => return,
             }
@@ -1148,6 +1181,26 @@ mod tests {
             "{reach} vs {}",
             short(v0 / 3.0)
         );
+    }
+
+    #[test]
+    fn state_at_distance_inverts_the_profile() {
+        // A stop from 40 mm/s while still accelerating at 300 mm/s²: all
+        // three phases have length. Sample it in time, look each distance
+        // up again, and compare speed and acceleration.
+        let stop = Brake::shortest(40.0, 300.0, 0.0, 800.0, 20_000.0).unwrap();
+        assert!(stop.phases.iter().all(|p| p.1 > 0.0), "{stop:?}");
+        for k in 1..200 {
+            let t = stop.duration() * k as f64 / 200.0;
+            let (s, v, a) = stop.at(t);
+            let (v2, a2) = stop.state_at_distance(s);
+            assert!(
+                (v - v2).abs() < 1e-7 && (a - a2).abs() < 1e-4,
+                "t {t}: ({v}, {a}) vs ({v2}, {a2})"
+            );
+        }
+        // Past its end the profile rests at its target speed.
+        assert_eq!(stop.state_at_distance(stop.length() + 1.0), (0.0, 0.0));
     }
 
     #[test]
