@@ -902,9 +902,16 @@ impl Executor {
                 let left = p.length() - s1;
                 let check =
                     self.look_ahead_except(q, head, self.s + (s1 - s0), v1, a1, Some((left, p.v1)));
-                if let (false, Some(b)) = (check.ok, check.binding) {
-                    let dist = b.dist + (s1 - s0);
-                    self.brake = Brake::reaching(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                match (check.ok, check.binding) {
+                    (false, Some(b)) => {
+                        let dist = b.dist + (s1 - s0);
+                        self.brake = Brake::reaching(self.v, self.a, b.limit, dist, b.amax, b.jmax);
+                    }
+                    // The profile would not ease its acceleration in time
+                    // for a segment with a lower limit (it uses the jerk
+                    // limit of its target): leave it to the jerk search.
+                    (false, None) => self.brake = None,
+                    _ => {}
                 }
                 self.aim_past_end(q, head);
             } else if let Some(b) = ahead
