@@ -1387,15 +1387,18 @@ mod simulation {
         }
     }
 
-    #[test]
-    fn random_programs_end_exactly_within_limits() {
-        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
-        for case in 0..40 {
+    /// Random programs of 30 moves from `seed`: long moves, tiny ones,
+    /// shallow and sharp corners, reversals, rapids and plunges, at the
+    /// three tolerances in turn. Each must end exactly where programmed,
+    /// within limits; returns the failures as messages.
+    fn random_programs(seed: u64, cases: usize) -> Vec<String> {
+        let mut rng = Rng(seed);
+        let mut failures = Vec::new();
+        for case in 0..cases {
             let mut text = String::from("G21 G90\n");
             let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
             for _ in 0..30 {
                 let kind = rng.next();
-                // Long moves, tiny ones, shallow and sharp corners, reversals.
                 let len = if rng.next() < 0.3 {
                     0.01 + rng.next() * 0.2
                 } else {
@@ -1428,16 +1431,44 @@ mod simulation {
             let mut q = planned(&text, PathMode::Blend { tolerance });
             let out = run(&mut q, |_, _| {});
             let end = out.last().unwrap().position;
-            assert!(
-                (end.x - x).abs() < 1e-9 && (end.y - y).abs() < 1e-9 && (end.z - z).abs() < 1e-9,
-                "case {case}: ended at {end:?}, programmed X{x} Y{y} Z{z}"
-            );
+            if (end.x - x).abs() >= 1e-9 || (end.y - y).abs() >= 1e-9 || (end.z - z).abs() >= 1e-9 {
+                failures.push(format!(
+                    "seed {seed} case {case}: ended at {end:?}, programmed X{x} Y{y} Z{z}"
+                ));
+            }
             let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "case {case} (P{tolerance}): velocity {v}, acceleration {a}, jerk {j}\n{text}"
-            );
+            if v > 1.0 + 1e-6 || a > 1.0 + 1e-6 || j > 1.0 + 1e-6 {
+                failures.push(format!(
+                    "seed {seed} case {case} (P{tolerance}): velocity {v}, acceleration {a}, jerk {j}\n{text}"
+                ));
+            }
         }
+        failures
+    }
+
+    #[test]
+    fn random_programs_end_exactly_within_limits() {
+        let failures = random_programs(0x9e37_79b9_7f4a_7c15, 40);
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// 600 more random programs: minutes in a debug build, so run on
+    /// demand (`cargo test --release -p kerf-motion -- --ignored sweep
+    /// --nocapture`); it prints each failure and counts them. Measured
+    /// 2026-11-21: two velocity overshoots of 1.6 ppm (seed 11 case 76,
+    /// seed 44 case 44: the speed limit of a long, nearly straight blend is
+    /// taken from 33 samples of its tangent), nothing else.
+    #[test]
+    #[ignore = "long sweep; run on demand"]
+    fn random_program_sweep() {
+        let failures: Vec<String> = [11, 22, 33, 44]
+            .into_iter()
+            .flat_map(|seed| random_programs(seed, 150))
+            .collect();
+        for f in &failures {
+            eprintln!("{}", f.lines().next().unwrap_or_default());
+        }
+        assert!(failures.is_empty(), "{} of 600 failed", failures.len());
     }
 
     /// A closed circle of `n` chords at `feed` mm/min, blended within
