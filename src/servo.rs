@@ -373,6 +373,11 @@ impl ServoTick {
                 .is_some_and(|f| f.load(Ordering::Acquire))
     }
 
+    /// Commands are waiting for the next tick.
+    pub fn has_commands(&self) -> bool {
+        !self.commands.is_empty()
+    }
+
     /// True once everything the executor needs ahead is queued: the queue
     /// is empty, full, or holds a `Stop` marker (the rest of a program) or
     /// an M66 wait (the planner waits for its answer).
@@ -820,8 +825,10 @@ pub enum Pacing {
     /// Ticks back to back on a virtual clock that advances one period per
     /// tick: deterministic and as fast as the CPU allows. Before each tick
     /// the thread waits until the planner has queued what the executor
-    /// needs ahead ([`ServoTick::input_complete`]); while idle it sleeps
-    /// 1 ms of wall time between ticks rather than spin.
+    /// needs ahead ([`ServoTick::input_complete`]). Idle — no motion
+    /// queued, no command waiting — it runs 200 more ticks for things to
+    /// settle and then stops the clock until something arrives, so a run
+    /// does not depend on how long the client paused before it.
     Virtual,
 }
 
@@ -1021,18 +1028,35 @@ fn run_wall(
     }
 }
 
+/// Ticks a virtual-clock servo runs on after the last sign of activity
+/// (a command, queued motion), so drives, loops and controllers settle.
+const VIRTUAL_SETTLE_TICKS: u32 = 200;
+
 fn run_virtual(tick: &mut ServoTick, status: &mut Writer<Snapshot>, stop: &AtomicBool) {
+    let mut settle = VIRTUAL_SETTLE_TICKS;
+    let mut moving = false;
     while !stop.load(Ordering::Relaxed) {
         // Wait for the planner (it is fast; this is rarely more than a
         // few polls), so the executor sees the same queue as on a real run.
         while (!tick.input_complete() || tick.starved()) && !stop.load(Ordering::Relaxed) {
             std::thread::sleep(Duration::from_micros(50));
         }
+        // Idle and settled, virtual time stands still: ticking once per
+        // millisecond of wall time would advance the simulation (its
+        // seeded noise, the controllers) by however long the client took
+        // between commands, and a run would depend on it.
+        let busy = moving || tick.queue.slots() > 0 || tick.has_commands();
+        if busy {
+            settle = VIRTUAL_SETTLE_TICKS;
+        } else if settle == 0 {
+            std::thread::sleep(Duration::from_micros(200));
+            continue;
+        } else {
+            settle -= 1;
+        }
         let snap = *tick.tick();
         status.write(&snap);
-        if !snap.moving && tick.queue.slots() == 0 {
-            std::thread::sleep(Duration::from_millis(1));
-        }
+        moving = snap.moving;
     }
 }
 
