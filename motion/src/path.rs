@@ -50,8 +50,8 @@ pub struct Arc {
     pub end: Vec9,
 }
 
-/// Intervals of a blend's arc-length table. Five-point Gauss–Legendre on
-/// eighths of a quintic corner is exact to about 1e-12 of its length.
+/// Intervals of a blend's arc-length table (see [`Blend::sampled`] for how
+/// it is integrated).
 pub const TABLE: usize = 8;
 
 /// A G2-continuous corner blend: a quintic Bézier whose first three and
@@ -237,12 +237,58 @@ impl Blend {
 
     /// The blend with these control points, with its arc-length table.
     pub fn from_control(control: [Vec9; 6]) -> Blend {
+        Blend::sampled(control).0
+    }
+
+    /// The blend with these control points, with its arc-length table, and
+    /// its frames at [`SAMPLES`] + 1 evenly spaced parameters, which the
+    /// planner needs for its limits: one pass of polynomial evaluations
+    /// gives both.
+    ///
+    /// Sample arc lengths by Simpson's rule on each sample interval (speeds
+    /// at the samples and midway between them): they only scale the rate of
+    /// change of curvature between samples, which the planner pads by 25 %
+    /// anyway, and agree with the table to about 1e-8 of the length.
+    pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendSamples) {
+        const M: usize = 2 * SAMPLES;
+        let poly = Poly::new(&control);
+        let mut speed = [0.0; M + 1];
+        let mut out = BlendSamples {
+            s: [0.0; SAMPLES + 1],
+            tangent: [[0.0; 3]; SAMPLES + 1],
+            curvature: [[0.0; 3]; SAMPLES + 1],
+        };
+        for k in 0..=M {
+            let u = k as f64 / M as f64;
+            let d1 = poly.d1(u);
+            let v2 = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
+            let v = v2.sqrt();
+            speed[k] = v;
+            if k % 2 == 0 {
+                // d²p/ds² = (d2 − (d2·t) t) / |d1|² in the Bézier parameter.
+                let d2 = poly.d2(u);
+                let t = [d1[0] / v, d1[1] / v, d1[2] / v];
+                let along = d2[0] * t[0] + d2[1] * t[1] + d2[2] * t[2];
+                let j = k / 2;
+                out.tangent[j] = t;
+                out.curvature[j] = std::array::from_fn(|i| (d2[i] - along * t[i]) / v2);
+            }
+        }
+        let h = 1.0 / M as f64;
+        for j in 1..=SAMPLES {
+            let k = 2 * j;
+            let simpson = h / 3.0 * (speed[k - 2] + 4.0 * speed[k - 1] + speed[k]);
+            out.s[j] = out.s[j - 1] + simpson;
+        }
+        // The table by five-point Gauss–Legendre on each interval: the same
+        // rule `parameter` integrates with inside an interval, so the
+        // arc-length parametrisation is continuous across table entries.
         let mut b = Blend::untabled(control);
         for i in 0..TABLE {
             let (u0, u1) = (i as f64 / TABLE as f64, (i + 1) as f64 / TABLE as f64);
-            b.table[i + 1] = b.table[i] + b.speed_integral(u0, u1);
+            b.table[i + 1] = b.table[i] + poly.speed_integral(u0, u1);
         }
-        b
+        (b, out)
     }
 
     /// The blend without its arc-length table: enough for
@@ -257,24 +303,7 @@ impl Blend {
 
     /// |d B / du| (the hodograph's length), cheaper than [`derivatives`].
     pub fn speed(&self, u: f64) -> f64 {
-        let q = &self.control;
-        let w = 1.0 - u;
-        let b4 = [
-            w * w * w * w,
-            4.0 * u * w * w * w,
-            6.0 * u * u * w * w,
-            4.0 * u * u * u * w,
-            u * u * u * u,
-        ];
-        (0..3)
-            .map(|i| {
-                (0..5)
-                    .map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i]))
-                    .sum::<f64>()
-                    .powi(2)
-            })
-            .sum::<f64>()
-            .sqrt()
+        Poly::new(&self.control).speed(u)
     }
 
     /// Point, unit tangent and curvature vector at Bézier parameter `u`.
@@ -294,7 +323,7 @@ impl Blend {
     pub fn length_to(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
         let i = ((u * TABLE as f64) as usize).min(TABLE - 1);
-        self.table[i] + self.speed_integral(i as f64 / TABLE as f64, u)
+        self.table[i] + Poly::new(&self.control).speed_integral(i as f64 / TABLE as f64, u)
     }
 
     /// Distance from the corner to the blend's midpoint, which is the blend's
@@ -307,40 +336,134 @@ impl Blend {
     /// Point, first and second derivative in the Bézier parameter. Blends
     /// join XYZ-only lines, so only X Y Z vary; the other axes stay put.
     fn derivatives(&self, u: f64) -> (Vec9, Vec9, Vec9) {
-        let q = &self.control;
-        let w = 1.0 - u;
-        let (u2, w2) = (u * u, w * w);
-        let b5 = bernstein5(u);
-        let b4 = [
-            w2 * w2,
-            4.0 * u * w2 * w,
-            6.0 * u2 * w2,
-            4.0 * u2 * u * w,
-            u2 * u2,
-        ];
-        let b3 = [w2 * w, 3.0 * u * w2, 3.0 * u2 * w, u2 * u];
-        let mut p = q[0];
+        let poly = Poly::new(&self.control);
+        let (p3, d13, d23) = (poly.point(u), poly.d1(u), poly.d2(u));
+        let mut p = self.control[0];
         let mut d1 = [0.0; 9];
         let mut d2 = [0.0; 9];
-        for i in 0..3 {
-            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
-            d1[i] = (0..5).map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i])).sum();
-            d2[i] = (0..4)
-                .map(|k| 20.0 * b3[k] * (q[k + 2][i] - 2.0 * q[k + 1][i] + q[k][i]))
-                .sum();
-        }
+        p[..3].copy_from_slice(&p3);
+        d1[..3].copy_from_slice(&d13);
+        d2[..3].copy_from_slice(&d23);
         (p, d1, d2)
     }
 
     /// Point at Bézier parameter `u` (X Y Z vary, as in [`derivatives`]).
     pub fn point_at_parameter(&self, u: f64) -> Vec9 {
-        let q = &self.control;
-        let b5 = bernstein5(u);
-        let mut p = q[0];
-        for i in 0..3 {
-            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
-        }
+        let mut p = self.control[0];
+        p[..3].copy_from_slice(&Poly::new(&self.control).point(u));
         p
+    }
+
+    /// Total arc length.
+    pub fn length(&self) -> f64 {
+        self.table[TABLE]
+    }
+
+    /// The Bézier parameter at arc length `s` (Newton from the table).
+    fn parameter(&self, s: f64) -> f64 {
+        if s <= 0.0 {
+            return 0.0;
+        }
+        if s >= self.length() {
+            return 1.0;
+        }
+        let poly = Poly::new(&self.control);
+        let i = self.table.partition_point(|&t| t <= s).clamp(1, TABLE) - 1;
+        let (s0, s1) = (self.table[i], self.table[i + 1]);
+        let u0 = i as f64 / TABLE as f64;
+        let mut u = u0
+            + if s1 > s0 {
+                (s - s0) / (s1 - s0) / TABLE as f64
+            } else {
+                0.0
+            };
+        for _ in 0..3 {
+            let err = s0 + poly.speed_integral(u0, u) - s;
+            let speed = poly.speed(u);
+            if speed <= 0.0 {
+                break;
+            }
+            u = (u - err / speed).clamp(0.0, 1.0);
+        }
+        u
+    }
+}
+
+/// Parameter intervals of [`Blend::sampled`].
+pub const SAMPLES: usize = 32;
+
+/// A blend's unit tangent and curvature vector (X Y Z) at u = k/SAMPLES,
+/// k = 0..=SAMPLES, with the arc length from the start to each.
+#[derive(Clone, Copy, Debug)]
+pub struct BlendSamples {
+    pub s: [f64; SAMPLES + 1],
+    pub tangent: [[f64; 3]; SAMPLES + 1],
+    pub curvature: [[f64; 3]; SAMPLES + 1],
+}
+
+/// X, Y and Z of a blend as polynomials in the Bézier parameter (power
+/// basis), with their first and second derivatives: converted once from the
+/// control points, each evaluation is then a few multiply-adds per axis.
+/// Blends join XYZ-only lines, so the other axes stay put.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Poly {
+    /// `p[i][k]`: coefficient of u^k in axis i.
+    p: [[f64; 6]; 3],
+    d1: [[f64; 5]; 3],
+    d2: [[f64; 4]; 3],
+}
+
+impl Poly {
+    pub(crate) fn new(q: &[Vec9; 6]) -> Poly {
+        // Bernstein to power basis: c_k = C(5, k)·Δ^k Q_0.
+        const BINOMIAL: [f64; 6] = [1.0, 5.0, 10.0, 10.0, 5.0, 1.0];
+        let mut poly = Poly {
+            p: [[0.0; 6]; 3],
+            d1: [[0.0; 5]; 3],
+            d2: [[0.0; 4]; 3],
+        };
+        for i in 0..3 {
+            let mut d = [q[0][i], q[1][i], q[2][i], q[3][i], q[4][i], q[5][i]];
+            for k in 0..6 {
+                poly.p[i][k] = BINOMIAL[k] * d[0];
+                for j in 0..5 - k {
+                    d[j] = d[j + 1] - d[j];
+                }
+            }
+            for k in 0..5 {
+                poly.d1[i][k] = (k + 1) as f64 * poly.p[i][k + 1];
+            }
+            for k in 0..4 {
+                poly.d2[i][k] = (k + 1) as f64 * poly.d1[i][k + 1];
+            }
+        }
+        poly
+    }
+
+    fn horner<const N: usize>(c: &[f64; N], u: f64) -> f64 {
+        let mut r = c[N - 1];
+        for k in (0..N - 1).rev() {
+            r = r * u + c[k];
+        }
+        r
+    }
+
+    pub(crate) fn point(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.p[i], u))
+    }
+
+    pub(crate) fn d1(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.d1[i], u))
+    }
+
+    pub(crate) fn d2(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.d2[i], u))
+    }
+
+    /// |dB/du|.
+    pub(crate) fn speed(&self, u: f64) -> f64 {
+        let d = self.d1(u);
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
     }
 
     /// Arc length between parameters u0 and u1 (5-point Gauss–Legendre).
@@ -361,42 +484,9 @@ impl Blend {
         ];
         let (mid, half) = ((u0 + u1) / 2.0, (u1 - u0) / 2.0);
         (0..5)
-            .map(|k| W[k] * norm(&self.derivatives(mid + half * X[k]).1))
+            .map(|k| W[k] * self.speed(mid + half * X[k]))
             .sum::<f64>()
             * half
-    }
-
-    /// Total arc length.
-    pub fn length(&self) -> f64 {
-        self.table[TABLE]
-    }
-
-    /// The Bézier parameter at arc length `s` (Newton from the table).
-    fn parameter(&self, s: f64) -> f64 {
-        if s <= 0.0 {
-            return 0.0;
-        }
-        if s >= self.length() {
-            return 1.0;
-        }
-        let i = self.table.partition_point(|&t| t <= s).clamp(1, TABLE) - 1;
-        let (s0, s1) = (self.table[i], self.table[i + 1]);
-        let u0 = i as f64 / TABLE as f64;
-        let mut u = u0
-            + if s1 > s0 {
-                (s - s0) / (s1 - s0) / TABLE as f64
-            } else {
-                0.0
-            };
-        for _ in 0..3 {
-            let err = s0 + self.speed_integral(u0, u) - s;
-            let speed = self.speed(u);
-            if speed <= 0.0 {
-                break;
-            }
-            u = (u - err / speed).clamp(0.0, 1.0);
-        }
-        u
     }
 }
 
@@ -497,20 +587,6 @@ impl Shape {
             curvature: k,
         }
     }
-}
-
-/// The six quintic Bernstein polynomials at `u`.
-fn bernstein5(u: f64) -> [f64; 6] {
-    let w = 1.0 - u;
-    let (u2, w2) = (u * u, w * w);
-    [
-        w2 * w2 * w,
-        5.0 * u * w2 * w2,
-        10.0 * u2 * w2 * w,
-        10.0 * u2 * u * w2,
-        5.0 * u2 * u2 * w,
-        u2 * u2 * u,
-    ]
 }
 
 #[cfg(test)]
