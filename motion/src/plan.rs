@@ -235,7 +235,7 @@ impl Default for PlannerConfig {
 struct Pending {
     segment: Segment,
     /// The line as programmed (before blends trimmed it), when it is one.
-    programmed: Option<Line>,
+    programmed: Option<Programmed>,
     /// The line as trimmed so far.
     line: Option<Line>,
     /// Path mode in force when the move was programmed.
@@ -248,7 +248,29 @@ struct Pending {
 
 impl Pending {
     fn full_length(&self) -> f64 {
-        self.programmed.map_or(self.segment.length, |l| l.length())
+        self.programmed.map_or(self.segment.length, |p| p.length)
+    }
+}
+
+/// A programmed line with what the blend decisions ask of it again and
+/// again, worked out once.
+#[derive(Clone, Copy, Debug)]
+struct Programmed {
+    line: Line,
+    direction: Vec9,
+    length: f64,
+    /// Only X Y Z move (blends join such lines only).
+    xyz_only: bool,
+}
+
+impl Programmed {
+    fn new(line: Line) -> Programmed {
+        Programmed {
+            line,
+            direction: line.direction(),
+            length: line.length(),
+            xyz_only: (3..9).all(|i| line.start[i] == line.end[i]),
+        }
     }
 }
 
@@ -343,13 +365,14 @@ fn sampled_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed
 /// the second half of `lb` likewise. The hodograph B′ is a quartic with
 /// control points 5·(Q[k+1] − Q[k]); its component along any unit vector e
 /// is at least the least of theirs, and |B′| ≥ B′·e. Both bounds hold for
-/// every u, not only the sampled ones; a margin of 1e-9 covers rounding.
+/// every u, not only the sampled ones; a margin of 1e-9 covers rounding
+/// (and squared distances where the sampled test takes roots).
 fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> bool {
     // De Casteljau at ½: the left half's control points are the first
     // points of each level, the right half's the last ones (reversed).
-    let mut level: [Vec9; 6] = *q;
-    let mut left = [[0.0; 9]; 6];
-    let mut right = [[0.0; 9]; 6];
+    let mut level: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
+    let mut left = [[0.0; 3]; 6];
+    let mut right = [[0.0; 3]; 6];
     for n in 0..6 {
         left[n] = level[0];
         right[5 - n] = level[5 - n];
@@ -360,9 +383,20 @@ fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed:
         }
     }
     let limit = tolerance * (1.0 - 1e-9);
-    if !left.iter().all(|p| distance_to_xyz_line(p, la) <= limit)
-        || !right.iter().all(|p| distance_to_xyz_line(p, lb) <= limit)
-    {
+    let limit2 = limit * limit;
+    let within = |points: &[[f64; 3]; 6], l: &Line| {
+        // Squared distance to the segment, its direction worked out once.
+        let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
+        let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let inv = if dd > 0.0 { 1.0 / dd } else { 0.0 };
+        points.iter().all(|p| {
+            let w: [f64; 3] = std::array::from_fn(|i| p[i] - l.start[i]);
+            let t = ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) * inv).clamp(0.0, 1.0);
+            let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
+            e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= limit2
+        })
+    };
+    if !within(&left, la) || !within(&right, lb) {
         return false;
     }
     let chord: [f64; 3] = std::array::from_fn(|i| q[5][i] - q[0][i]);
@@ -375,10 +409,9 @@ fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed:
             (0..3)
                 .map(|i| 5.0 * (q[k + 1][i] - q[k][i]) * chord[i])
                 .sum::<f64>()
-                / length
         })
         .fold(f64::INFINITY, f64::min);
-    slowest >= min_speed * (1.0 + 1e-9)
+    slowest >= min_speed * length * (1.0 + 1e-9)
 }
 
 impl<'k> Planner<'k> {
@@ -751,7 +784,7 @@ impl<'k> Planner<'k> {
         segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
-            programmed: Some(line),
+            programmed: Some(Programmed::new(line)),
             line: Some(line),
             mode: self.mode,
             start_leg: 0.0,
@@ -788,21 +821,20 @@ impl<'k> Planner<'k> {
     /// Each leg is the tolerance's leg or half its line, whichever is less,
     /// so on dense paths blends meet at line midpoints.
     fn legs(&self, a: &Pending, b: &Pending) -> Option<(f64, f64)> {
-        let (Some(la), Some(lb)) = (a.programmed, b.programmed) else {
+        let (Some(la), Some(lb)) = (&a.programmed, &b.programmed) else {
             return None;
         };
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let xyz_only = |l: &Line| (3..9).all(|i| l.start[i] == l.end[i]);
-        let (u1, u2) = (la.direction(), lb.direction());
+        let (u1, u2) = (&la.direction, &lb.direction);
         let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
-        if !(STRAIGHT..=SHARPEST).contains(&bend) || !xyz_only(&la) || !xyz_only(&lb) {
+        if !(STRAIGHT..=SHARPEST).contains(&bend) || !la.xyz_only || !lb.xyz_only {
             return None;
         }
         // Closed-form leg of a symmetric blend with zero end curvature.
         let leg = tolerance * 32.0 / (6.0 * bend);
-        let (a, b) = (leg.min(la.length() / 2.0), leg.min(lb.length() / 2.0));
+        let (a, b) = (leg.min(la.length / 2.0), leg.min(lb.length / 2.0));
         // Unequal legs let dense curves blend midpoint to midpoint though
         // neighbouring chords differ a little; a tolerance bounds how far
         // they stray. Without one (G64 with no P), bound the ratio instead,
@@ -818,9 +850,9 @@ impl<'k> Planner<'k> {
     /// Curvature the path should have at the midpoint of `b`, a line whose
     /// two blends meet there: the mean of the discrete curvatures at its two
     /// vertices (exactly 1/R on a polygon inscribed in a circle of radius R).
-    fn mid_curvature(a: &Line, b: &Line, c: &Line) -> Vec9 {
-        let (ta, tb, tc) = (a.direction(), b.direction(), c.direction());
-        let (la, lb, lc) = (a.length(), b.length(), c.length());
+    fn mid_curvature(a: &Programmed, b: &Programmed, c: &Programmed) -> Vec9 {
+        let (ta, tb, tc) = (&a.direction, &b.direction, &c.direction);
+        let (la, lb, lc) = (a.length, b.length, c.length);
         let mut k: Vec9 = std::array::from_fn(|i| {
             ((tb[i] - ta[i]) / ((la + lb) / 2.0) + (tc[i] - tb[i]) / ((lb + lc) / 2.0)) / 2.0
         });
@@ -841,18 +873,19 @@ impl<'k> Planner<'k> {
         k0: &Vec9,
         k1: &Vec9,
     ) -> Option<[Vec9; 6]> {
-        let (la, lb) = (a.programmed?, b.programmed?);
+        let (pa, pb) = (a.programmed.as_ref()?, b.programmed.as_ref()?);
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let (u1, u2) = (la.direction(), lb.direction());
+        let (la, lb) = (pa.line, pb.line);
+        let (u1, u2) = (&pa.direction, &pb.direction);
         let corner = la.end;
         let control = Blend::hermite_control(
             &std::array::from_fn(|i| corner[i] - legs.0 * u1[i]),
-            &u1,
+            u1,
             k0,
             &std::array::from_fn(|i| corner[i] + legs.1 * u2[i]),
-            &u2,
+            u2,
             k1,
             legs.0 + legs.1,
         );
@@ -870,7 +903,6 @@ impl<'k> Planner<'k> {
     /// Emit what the waiting moves decide. With `last`, everything goes and
     /// the final move ends at rest.
     fn drain(&mut self, last: bool) {
-        let zero = [0.0; 9];
         loop {
             let n = self.pending.len();
             if n == 0 {
@@ -887,75 +919,36 @@ impl<'k> Planner<'k> {
             if both_lines && n < 3 && !last {
                 return; // the midpoint of pending[1] depends on the next move
             }
-            let a = self.pending[0];
-            let b = self.pending[1];
-            let Some(mut legs) = (if both_lines { self.legs(&a, &b) } else { None }) else {
-                let exit = self.junction(&a, &b);
-                self.pending.pop_front();
+            let Some((legs, control, k1)) = self.choose_blend(both_lines) else {
+                // No blend here, or none fits: stop (or go straight on) at
+                // the corner.
+                let exit = self.junction(&self.pending[0], &self.pending[1]);
+                let a = self.pending.pop_front().expect("two waiting");
                 self.emit(a.segment, exit);
                 continue;
             };
-            let c = self.pending.get(2).copied().filter(|c| c.line.is_some());
-            let legs_bc = c.and_then(|c| self.legs(&b, &c));
-            let half = |p: &Pending| p.full_length() / 2.0;
-            // A line is consumed when blends take both its halves; the
-            // curvature chosen at its midpoint is shared by both blends.
-            let a_consumed = a.start_leg == half(&a) && legs.0 == half(&a);
-            let k0 = if a_consumed { a.mid_curvature } else { zero };
-            let b_consumed = legs.1 == half(&b) && legs_bc.is_some_and(|l| l.0 == half(&b));
-            let mut k1 = zero;
-            let mut blend = None;
-            if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
-                let candidate = Self::mid_curvature(
-                    &a.programmed.unwrap(),
-                    &b.programmed.unwrap(),
-                    &c.programmed.unwrap(),
-                );
-                if let Some(bl) = Self::blend_within(&a, &b, legs, &k0, &candidate) {
-                    if Self::blend_within(&b, &c, legs_bc, &candidate, &zero).is_some() {
-                        k1 = candidate;
-                        blend = Some(bl);
-                    }
-                }
-            }
-            let control = match blend {
-                Some(control) => control,
-                None => {
-                    // Zero curvature at b's end. With k0 fixed the legs are
-                    // too (a's midpoint is shared); otherwise shrink them
-                    // until the blend is within tolerance.
-                    let mut found = Self::blend_within(&a, &b, legs, &k0, &zero);
-                    if !a_consumed {
-                        for _ in 0..8 {
-                            if found.is_some() {
-                                break;
-                            }
-                            legs = (legs.0 * 0.7, legs.1 * 0.7);
-                            found = Self::blend_within(&a, &b, legs, &zero, &zero);
-                        }
-                    }
-                    match found {
-                        Some(control) => control,
-                        None => {
-                            // No blend fits: stop at the corner.
-                            let exit = self.junction(&a, &b);
-                            self.pending.pop_front();
-                            self.emit(a.segment, exit);
-                            continue;
-                        }
-                    }
-                }
-            };
-            let corner = a.programmed.unwrap().end;
+            let a = &self.pending[0];
+            let corner = a.programmed.expect("a line").line.end;
             let (u1, u2) = (
-                a.programmed.unwrap().direction(),
-                b.programmed.unwrap().direction(),
+                a.programmed.expect("a line").direction,
+                self.pending[1].programmed.expect("a line").direction,
             );
-            let mut a = self.pending.pop_front().expect("two waiting");
+            // Trim a and b in place: a waiting move is over a kilobyte, and
+            // copies of them showed in profiles.
+            let a = &mut self.pending[0];
             let mut trimmed = a.line.expect("a line");
             trimmed.end = std::array::from_fn(|i| corner[i] - legs.0 * u1[i]);
             a.segment.shape = Shape::Line(trimmed);
             a.segment.length = trimmed.length();
+            let a_kind = a.segment.kind;
+            let a_feed = a.segment.feed;
+            // Equal tangents and curvatures meet at both ends of the blend;
+            // a consumed line leaves nothing (or rounding) between blends.
+            if a.segment.length > 1e-9 * a.full_length().max(1.0) {
+                let segment = a.segment;
+                self.emit(segment, f64::INFINITY);
+            }
+            self.pending.pop_front();
             let b = self.pending.front_mut().expect("b waits");
             let mut b_line = b.line.expect("a line");
             b_line.start = std::array::from_fn(|i| corner[i] + legs.1 * u2[i]);
@@ -964,31 +957,73 @@ impl<'k> Planner<'k> {
             b.segment.length = b_line.length();
             b.start_leg = legs.1;
             b.mid_curvature = k1;
-            let b_segment = b.segment;
+            let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
+            let b_force = b.segment.force_control;
             // Line b's motion now starts with the blend.
-            b.segment.outputs = SyncOutputs::default();
-            let kind =
-                if a.segment.kind == SegmentKind::Rapid && b_segment.kind == SegmentKind::Rapid {
-                    SegmentKind::Rapid
-                } else {
-                    SegmentKind::Feed
-                };
+            let b_outputs = std::mem::take(&mut b.segment.outputs);
+            let kind = if a_kind == SegmentKind::Rapid && b_kind == SegmentKind::Rapid {
+                SegmentKind::Rapid
+            } else {
+                SegmentKind::Feed
+            };
             // The blend's table and the samples for its limits in one pass.
             let (shape, samples) = Blend::sampled(control);
             let mut blend =
-                self.segment_sampled(kind, b_segment.line, Shape::Blend(shape), Some(&samples));
-            blend.feed = a.segment.feed.min(b_segment.feed);
+                self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&samples));
+            blend.feed = a_feed.min(b_feed);
             // The blend starts line b, so it carries b's force setting, not
             // whatever the program has set since.
-            blend.force_control = b_segment.force_control;
-            blend.outputs = b_segment.outputs;
-            // Equal tangents and curvatures meet at both ends of the blend;
-            // a consumed line leaves nothing (or rounding) between blends.
-            if a.segment.length > 1e-9 * a.full_length().max(1.0) {
-                self.emit(a.segment, f64::INFINITY);
-            }
+            blend.force_control = b_force;
+            blend.outputs = b_outputs;
             self.emit(blend, f64::INFINITY);
         }
+    }
+
+    /// The blend at the corner between the first two waiting moves, if they
+    /// are lines (`both_lines`) to blend and one fits: its legs, control
+    /// points and the curvature it ends with.
+    fn choose_blend(&self, both_lines: bool) -> Option<((f64, f64), [Vec9; 6], Vec9)> {
+        let zero = [0.0; 9];
+        let (a, b) = (&self.pending[0], &self.pending[1]);
+        let mut legs = if both_lines {
+            self.legs(a, b)?
+        } else {
+            return None;
+        };
+        let c = self.pending.get(2).filter(|c| c.line.is_some());
+        let legs_bc = c.and_then(|c| self.legs(b, c));
+        let half = |p: &Pending| p.full_length() / 2.0;
+        // A line is consumed when blends take both its halves; the
+        // curvature chosen at its midpoint is shared by both blends.
+        let a_consumed = a.start_leg == half(a) && legs.0 == half(a);
+        let k0 = if a_consumed { a.mid_curvature } else { zero };
+        let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
+        if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
+            let candidate = Self::mid_curvature(
+                &a.programmed.unwrap(),
+                &b.programmed.unwrap(),
+                &c.programmed.unwrap(),
+            );
+            if let Some(bl) = Self::blend_within(a, b, legs, &k0, &candidate) {
+                if Self::blend_within(b, c, legs_bc, &candidate, &zero).is_some() {
+                    return Some((legs, bl, candidate));
+                }
+            }
+        }
+        // Zero curvature at b's end. With k0 fixed the legs are too (a's
+        // midpoint is shared); otherwise shrink them until the blend is
+        // within tolerance.
+        let mut found = Self::blend_within(a, b, legs, &k0, &zero);
+        if !a_consumed {
+            for _ in 0..8 {
+                if found.is_some() {
+                    break;
+                }
+                legs = (legs.0 * 0.7, legs.1 * 0.7);
+                found = Self::blend_within(a, b, legs, &zero, &zero);
+            }
+        }
+        found.map(|control| (legs, control, zero))
     }
 
     /// Speed cap where `a` meets `b` without a blend: straight or tangent
@@ -1107,26 +1142,31 @@ impl<'k> Planner<'k> {
                 // corner the curvature peak is narrow: the largest rate
                 // between samples can exceed the sampled differences, so
                 // they get a 25 % allowance.
+                let owned;
                 let samples = match samples {
-                    Some(samples) => *samples,
-                    None => Blend::sampled(b.control).1,
+                    Some(samples) => samples,
+                    None => {
+                        owned = Blend::sampled(b.control).1;
+                        &owned
+                    }
                 };
-                for k in 0..=SAMPLES {
-                    let (t, c) = (&samples.tangent[k], &samples.curvature[k]);
-                    for i in 0..3 {
-                        t_max[i] = t_max[i].max(t[i].abs());
-                        k_max[i] = k_max[i].max(c[i].abs());
+                // Plain comparisons rather than f64::max, whose NaN rules
+                // keep these loops from being vectorised (no NaN here).
+                let larger = |m: f64, x: f64| if x > m { x } else { m };
+                let inv_ds: [f64; SAMPLES] = std::array::from_fn(|k| {
+                    let ds = samples.s[k + 1] - samples.s[k];
+                    if ds > 0.0 {
+                        1.0 / ds
+                    } else {
+                        0.0
                     }
-                    if k > 0 {
-                        let ds = samples.s[k] - samples.s[k - 1];
-                        if ds > 0.0 {
-                            let c0 = &samples.curvature[k - 1];
-                            for i in 0..3 {
-                                let rate = (c[i] - c0[i]) / ds;
-                                dk_max[i] = dk_max[i].max(1.25 * rate.abs());
-                            }
-                        }
-                    }
+                });
+                for i in 0..3 {
+                    let (t, c) = (&samples.tangent[i], &samples.curvature[i]);
+                    t_max[i] = t.iter().fold(0.0, |m, x| larger(m, x.abs()));
+                    k_max[i] = c.iter().fold(0.0, |m, x| larger(m, x.abs()));
+                    let rate = (0..SAMPLES).map(|k| (c[k + 1] - c[k]).abs() * inv_ds[k]);
+                    dk_max[i] = 1.25 * rate.fold(0.0, larger);
                 }
             }
         }
