@@ -780,7 +780,9 @@ impl<'k> Planner<'k> {
             };
             return Err(self.error(canon, why.into()));
         }
-        let mut segment = self.segment(kind, canon.source.line, shape);
+        // The limits wait until the line is emitted: on dense paths blends
+        // consume most lines whole, and they never need them.
+        let mut segment = self.segment_unlimited(kind, canon.source.line, shape);
         segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
@@ -911,7 +913,7 @@ impl<'k> Planner<'k> {
             if n == 1 {
                 if last {
                     let a = self.pending.pop_front().expect("one waiting");
-                    self.emit(a.segment, 0.0);
+                    self.emit(self.settled(&a), 0.0);
                 }
                 return;
             }
@@ -924,7 +926,7 @@ impl<'k> Planner<'k> {
                 // the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
                 let a = self.pending.pop_front().expect("two waiting");
-                self.emit(a.segment, exit);
+                self.emit(self.settled(&a), exit);
                 continue;
             };
             let a = &self.pending[0];
@@ -945,7 +947,7 @@ impl<'k> Planner<'k> {
             // Equal tangents and curvatures meet at both ends of the blend;
             // a consumed line leaves nothing (or rounding) between blends.
             if a.segment.length > 1e-9 * a.full_length().max(1.0) {
-                let segment = a.segment;
+                let segment = self.settled(&self.pending[0]);
                 self.emit(segment, f64::INFINITY);
             }
             self.pending.pop_front();
@@ -1060,6 +1062,42 @@ impl<'k> Planner<'k> {
         self.segment_sampled(kind, line, shape, None)
     }
 
+    /// A segment of `shape` whose path limits are still to be worked out
+    /// (NaN) by [`settled`](Self::settled).
+    fn segment_unlimited(&self, kind: SegmentKind, line: u32, shape: Shape) -> Segment {
+        let feed = match kind {
+            SegmentKind::Feed => self.feed(),
+            _ => f64::INFINITY,
+        };
+        Segment {
+            kind,
+            line,
+            shape,
+            length: shape.length(),
+            feed,
+            max_velocity: f64::NAN,
+            max_acceleration: f64::NAN,
+            max_jerk: f64::NAN,
+            exit_velocity: 0.0,
+            force_control: self.force_control,
+            outputs: SyncOutputs::default(),
+        }
+    }
+
+    /// The segment of waiting move `p`, with its limits. A line's limits
+    /// come from the line as programmed: trimming does not turn it.
+    fn settled(&self, p: &Pending) -> Segment {
+        let mut segment = p.segment;
+        if let (true, Some(programmed)) = (segment.max_velocity.is_nan(), &p.programmed) {
+            let shape = Shape::Line(programmed.line);
+            let (v, a, j) = self.path_limits(&shape, programmed.length, None);
+            segment.max_velocity = v;
+            segment.max_acceleration = a;
+            segment.max_jerk = j;
+        }
+        segment
+    }
+
     /// [`segment`](Self::segment) with a blend's samples, if known.
     fn segment_sampled(
         &self,
@@ -1163,10 +1201,13 @@ impl<'k> Planner<'k> {
                 });
                 for i in 0..3 {
                     let (t, c) = (&samples.tangent[i], &samples.curvature[i]);
-                    t_max[i] = t.iter().fold(0.0, |m, x| larger(m, x.abs()));
-                    k_max[i] = c.iter().fold(0.0, |m, x| larger(m, x.abs()));
-                    let rate = (0..SAMPLES).map(|k| (c[k + 1] - c[k]).abs() * inv_ds[k]);
-                    dk_max[i] = 1.25 * rate.fold(0.0, larger);
+                    let (mut tm, mut km, mut rm) = (t[0].abs(), c[0].abs(), 0.0);
+                    for k in 0..SAMPLES {
+                        tm = larger(tm, t[k + 1].abs());
+                        km = larger(km, c[k + 1].abs());
+                        rm = larger(rm, (c[k + 1] - c[k]).abs() * inv_ds[k]);
+                    }
+                    (t_max[i], k_max[i], dk_max[i]) = (tm, km, 1.25 * rm);
                 }
             }
         }
