@@ -248,7 +248,7 @@ impl Blend {
     /// The sample arc lengths only scale the rate of change of curvature
     /// between samples, which the planner pads by 25 % anyway; they agree
     /// with the table to about 1e-8 of the length.
-    pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendSamples) {
+    pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
         // Loops over arrays of parameters, one axis at a time, so that the
         // compiler evaluates several parameters per instruction (exclusive
         // ranges: inclusive ones keep loops from being vectorised).
@@ -279,23 +279,20 @@ impl Blend {
             speed[k] = (d1[0][k] * d1[0][k] + d1[1][k] * d1[1][k] + d1[2][k] * d1[2][k]).sqrt();
             inv[k] = 1.0 / speed[k];
         }
-        let mut out = BlendSamples {
-            s: [0.0; N],
-            tangent: [[0.0; N]; 3],
-            curvature: [[0.0; N]; 3],
-        };
         // t = d1/|d1|, and d²p/ds² = (d2 − (d2·t) t) / |d1|² in the Bézier
         // parameter; d2·t is also d|d1|/du.
+        let mut tangent = [[0.0; N]; 3];
+        let mut curvature = [[0.0; N]; 3];
         let mut along = [0.0; N];
         for i in 0..3 {
             for k in 0..N {
-                out.tangent[i][k] = d1[i][k] * inv[k];
-                along[k] += d2[i][k] * out.tangent[i][k];
+                tangent[i][k] = d1[i][k] * inv[k];
+                along[k] += d2[i][k] * tangent[i][k];
             }
         }
         for i in 0..3 {
             for k in 0..N {
-                out.curvature[i][k] = (d2[i][k] - along[k] * out.tangent[i][k]) * (inv[k] * inv[k]);
+                curvature[i][k] = (d2[i][k] - along[k] * tangent[i][k]) * (inv[k] * inv[k]);
             }
         }
         // Arc length between samples by the trapezoidal rule with its
@@ -303,9 +300,28 @@ impl Blend {
         // their derivatives at the samples give for free: error O(h⁵),
         // as Simpson's rule.
         let h = 1.0 / SAMPLES as f64;
-        for k in 1..N {
-            let trapezoid = h / 2.0 * (speed[k - 1] + speed[k]);
-            out.s[k] = out.s[k - 1] + trapezoid + h * h / 12.0 * (along[k - 1] - along[k]);
+        let mut inv_ds = [0.0; SAMPLES];
+        for k in 0..SAMPLES {
+            let ds = h / 2.0 * (speed[k] + speed[k + 1]) + h * h / 12.0 * (along[k] - along[k + 1]);
+            inv_ds[k] = if ds > 0.0 { 1.0 / ds } else { 0.0 };
+        }
+        // Plain comparisons rather than f64::max, whose NaN rules cost
+        // more (no NaN here).
+        let larger = |m: f64, x: f64| if x > m { x } else { m };
+        let mut out = BlendExtremes {
+            tangent: [0.0; 3],
+            curvature: [0.0; 3],
+            curvature_rate: [0.0; 3],
+        };
+        for i in 0..3 {
+            let (t, c) = (&tangent[i], &curvature[i]);
+            let (mut tm, mut km, mut rm) = (t[0].abs(), c[0].abs(), 0.0);
+            for k in 0..SAMPLES {
+                tm = larger(tm, t[k + 1].abs());
+                km = larger(km, c[k + 1].abs());
+                rm = larger(rm, (c[k + 1] - c[k]).abs() * inv_ds[k]);
+            }
+            (out.tangent[i], out.curvature[i], out.curvature_rate[i]) = (tm, km, rm);
         }
         // The table by five-point Gauss–Legendre on each interval: the same
         // rule `parameter` integrates with inside an interval, so the
@@ -462,14 +478,16 @@ const GAUSS_W: [f64; 5] = [
 /// Parameter intervals of [`Blend::sampled`].
 pub const SAMPLES: usize = 32;
 
-/// A blend's unit tangent and curvature vector (X Y Z) at u = k/SAMPLES,
-/// k = 0..=SAMPLES, with the arc length from the start to each. Indexed
-/// `[axis][k]`.
+/// The largest values along a blend, per axis X Y Z, that the planner's
+/// limits depend on, from its frames at u = k/SAMPLES, k = 0..=SAMPLES.
 #[derive(Clone, Copy, Debug)]
-pub struct BlendSamples {
-    pub s: [f64; SAMPLES + 1],
-    pub tangent: [[f64; SAMPLES + 1]; 3],
-    pub curvature: [[f64; SAMPLES + 1]; 3],
+pub struct BlendExtremes {
+    /// Largest |t_i| of the unit tangent.
+    pub tangent: [f64; 3],
+    /// Largest |κ_i| of the curvature vector.
+    pub curvature: [f64; 3],
+    /// Largest |Δκ_i / Δs| between neighbouring samples.
+    pub curvature_rate: [f64; 3],
 }
 
 /// X, Y and Z of a blend as polynomials in the Bézier parameter (power

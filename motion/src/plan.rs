@@ -14,7 +14,7 @@ use std::collections::VecDeque;
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
-use crate::path::{norm, Arc, Blend, BlendSamples, Line, Poly, Shape, Vec9, SAMPLES};
+use crate::path::{norm, Arc, Blend, BlendExtremes, Line, Poly, Shape, Vec9};
 
 /// What a segment does.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -968,10 +968,10 @@ impl<'k> Planner<'k> {
             } else {
                 SegmentKind::Feed
             };
-            // The blend's table and the samples for its limits in one pass.
-            let (shape, samples) = Blend::sampled(control);
+            // The blend's table and what its limits need in one pass.
+            let (shape, extremes) = Blend::sampled(control);
             let mut blend =
-                self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&samples));
+                self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
             blend.feed = a_feed.min(b_feed);
             // The blend starts line b, so it carries b's force setting, not
             // whatever the program has set since.
@@ -1098,20 +1098,20 @@ impl<'k> Planner<'k> {
         segment
     }
 
-    /// [`segment`](Self::segment) with a blend's samples, if known.
+    /// [`segment`](Self::segment) with a blend's extremes, if known.
     fn segment_sampled(
         &self,
         kind: SegmentKind,
         line: u32,
         shape: Shape,
-        samples: Option<&BlendSamples>,
+        extremes: Option<&BlendExtremes>,
     ) -> Segment {
         let length = shape.length();
         let feed = match kind {
             SegmentKind::Feed => self.feed(),
             _ => f64::INFINITY,
         };
-        let (v, a, j) = self.path_limits(&shape, length, samples);
+        let (v, a, j) = self.path_limits(&shape, length, extremes);
         Segment {
             kind,
             line,
@@ -1136,12 +1136,12 @@ impl<'k> Planner<'k> {
     /// and half for acceleration and in thirds for jerk, which bounds the
     /// sum by the limit.
     ///
-    /// `samples` are a blend's samples when the caller has them.
+    /// `extremes` are a blend's ([`Blend::sampled`]) when the caller has them.
     fn path_limits(
         &self,
         shape: &Shape,
         length: f64,
-        samples: Option<&BlendSamples>,
+        extremes: Option<&BlendExtremes>,
     ) -> (f64, f64, f64) {
         let (mut v, mut a, mut j) = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
         // Largest |t_i|, |κ_i| and |dκ_i/ds| over the shape.
@@ -1181,33 +1181,17 @@ impl<'k> Planner<'k> {
                 // between samples can exceed the sampled differences, so
                 // they get a 25 % allowance.
                 let owned;
-                let samples = match samples {
-                    Some(samples) => samples,
+                let extremes = match extremes {
+                    Some(extremes) => extremes,
                     None => {
                         owned = Blend::sampled(b.control).1;
                         &owned
                     }
                 };
-                // Plain comparisons rather than f64::max, whose NaN rules
-                // keep these loops from being vectorised (no NaN here).
-                let larger = |m: f64, x: f64| if x > m { x } else { m };
-                let inv_ds: [f64; SAMPLES] = std::array::from_fn(|k| {
-                    let ds = samples.s[k + 1] - samples.s[k];
-                    if ds > 0.0 {
-                        1.0 / ds
-                    } else {
-                        0.0
-                    }
-                });
+                t_max[..3].copy_from_slice(&extremes.tangent);
+                k_max[..3].copy_from_slice(&extremes.curvature);
                 for i in 0..3 {
-                    let (t, c) = (&samples.tangent[i], &samples.curvature[i]);
-                    let (mut tm, mut km, mut rm) = (t[0].abs(), c[0].abs(), 0.0);
-                    for k in 0..SAMPLES {
-                        tm = larger(tm, t[k + 1].abs());
-                        km = larger(km, c[k + 1].abs());
-                        rm = larger(rm, (c[k + 1] - c[k]).abs() * inv_ds[k]);
-                    }
-                    (t_max[i], k_max[i], dk_max[i]) = (tm, km, 1.25 * rm);
+                    dk_max[i] = 1.25 * extremes.curvature_rate[i];
                 }
             }
         }
