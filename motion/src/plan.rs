@@ -327,50 +327,11 @@ const SHARPEST: f64 = 1.931_851_652_578_136_6; // 2·sin(75°)
 /// Directions closer than this (|u1 − u2|) are one straight line.
 const STRAIGHT: f64 = 1e-9;
 
-/// Distance in X Y Z from `p` to the line segment `l` (blends are made
-/// between XYZ-only lines, so the other axes do not differ).
-fn distance_to_xyz_line(p: &Vec9, l: &Line) -> f64 {
-    let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
-    let w: [f64; 3] = std::array::from_fn(|i| p[i] - l.start[i]);
-    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    let t = if dd > 0.0 {
-        ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
-    (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
-}
-
-/// The blend with control points `q` within `tolerance` of line `la` or
-/// `lb`, and |B′| at least `min_speed`, at 31 evenly spaced parameters.
-fn sampled_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> bool {
-    let poly = Poly::new(q);
-    (1..32).all(|k| {
-        let u = k as f64 / 32.0;
-        let mut p = q[0];
-        p[..3].copy_from_slice(&poly.point(u));
-        distance_to_xyz_line(&p, la).min(distance_to_xyz_line(&p, lb)) <= tolerance
-            && poly.speed(u) >= min_speed
-    })
-}
-
-/// A sufficient condition for [`sampled_within`] — every point within `tolerance` of line `la` or
-/// `lb` and |B′| at least `min_speed` — that costs a fraction of it. Most
-/// blends pass it with room to spare; the rest take the sampled test.
-///
-/// Split at u = ½, each half is a quintic whose points lie in the convex hull
-/// of its control points, and distance to a line segment is convex: so the
-/// first half is within `tolerance` of `la` if its control points are, and
-/// the second half of `lb` likewise. The hodograph B′ is a quartic with
-/// control points 5·(Q[k+1] − Q[k]); its component along any unit vector e
-/// is at least the least of theirs, and |B′| ≥ B′·e. Both bounds hold for
-/// every u, not only the sampled ones; a margin of 1e-9 covers rounding
-/// (and squared distances where the sampled test takes roots).
-fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> bool {
-    // De Casteljau at ½: the left half's control points are the first
-    // points of each level, the right half's the last ones (reversed).
-    let mut level: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
+/// The control points of the two halves of a quintic Bézier, split at
+/// u = ½ by de Casteljau: the left half's are the first points of each
+/// level, the right half's the last ones.
+fn halves(q: &[[f64; 3]; 6]) -> ([[f64; 3]; 6], [[f64; 3]; 6]) {
+    let mut level = *q;
     let mut left = [[0.0; 3]; 6];
     let mut right = [[0.0; 3]; 6];
     for n in 0..6 {
@@ -382,10 +343,51 @@ fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed:
             }
         }
     }
+    (left, right)
+}
+
+/// The blend with control points `q` within `tolerance` of line `la` or
+/// `lb`, and |B′| at least `min_speed`, at 31 evenly spaced parameters.
+fn sampled_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> bool {
+    let poly = Poly::new(q);
+    // Distance in X Y Z from `p` to the line segment `l` (blends are made
+    // between XYZ-only lines, so the other axes do not differ).
+    let dist = |p: &[f64; 3], l: &Line| {
+        let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
+        let w: [f64; 3] = std::array::from_fn(|i| p[i] - l.start[i]);
+        let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        let t = if dd > 0.0 {
+            ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
+        (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt()
+    };
+    (1..32).all(|k| {
+        let u = k as f64 / 32.0;
+        let p = poly.point(u);
+        dist(&p, la).min(dist(&p, lb)) <= tolerance && poly.speed(u) >= min_speed
+    })
+}
+
+/// A sufficient condition for [`sampled_within`] — every point within `tolerance` of line `la` or
+/// `lb` and |B′| at least `min_speed` — that costs a fraction of it. Most
+/// blends pass it with room to spare; the rest take the sampled test.
+///
+/// Split at u = ½, each half is a quintic whose points lie in the convex hull
+/// of its control points, and distance to a line segment is convex: so the
+/// first half is within `tolerance` of `la` if its control points are, and
+/// the second half of `lb` likewise (or their quarters, of either line). The hodograph B′ is a quartic with
+/// control points 5·(Q[k+1] − Q[k]); its component along any unit vector e
+/// is at least the least of theirs, and |B′| ≥ B′·e. Both bounds hold for
+/// every u, not only the sampled ones; a margin of 1e-9 covers rounding
+/// (and squared distances where the sampled test takes roots).
+fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> bool {
     let limit = tolerance * (1.0 - 1e-9);
     let limit2 = limit * limit;
+    // Squared distances to a segment, its direction worked out once.
     let within = |points: &[[f64; 3]; 6], l: &Line| {
-        // Squared distance to the segment, its direction worked out once.
         let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
         let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
         let inv = if dd > 0.0 { 1.0 / dd } else { 0.0 };
@@ -396,7 +398,17 @@ fn surely_within(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed:
             e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= limit2
         })
     };
-    if !within(&left, la) || !within(&right, lb) {
+    let points: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
+    let (left, right) = halves(&points);
+    // Most blends pass on halves; one near its tolerance may need quarters,
+    // whose hulls hug the curve closer, each against either line.
+    let piece = |half: &[[f64; 3]; 6], near: &Line| {
+        within(half, near) || {
+            let (a, b) = halves(half);
+            (within(&a, la) || within(&a, lb)) && (within(&b, la) || within(&b, lb))
+        }
+    };
+    if !piece(&left, la) || !piece(&right, lb) {
         return false;
     }
     let chord: [f64; 3] = std::array::from_fn(|i| q[5][i] - q[0][i]);
