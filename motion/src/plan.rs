@@ -1208,6 +1208,9 @@ impl<'k> Planner<'k> {
             }
         }
         let curved = !matches!(shape, Shape::Line(_));
+        // Roots are monotonic: one root of the least radicand over the axes
+        // gives the least root (cube roots are slow).
+        let (mut centripetal, mut rate) = (f64::INFINITY, f64::INFINITY);
         for i in 0..9 {
             let Some(l) = self.limits[i] else { continue };
             if t_max[i] > 0.0 {
@@ -1222,11 +1225,18 @@ impl<'k> Planner<'k> {
                 j = j.min(jshare * l.max_jerk / t_max[i]);
             }
             if k_max[i] > 0.0 {
-                v = v.min((self.config.centripetal_share * l.max_acceleration / k_max[i]).sqrt());
+                centripetal =
+                    centripetal.min(self.config.centripetal_share * l.max_acceleration / k_max[i]);
             }
             if dk_max[i] > 0.0 && l.max_jerk.is_finite() {
-                v = v.min((l.max_jerk / 3.0 / dk_max[i]).cbrt());
+                rate = rate.min(l.max_jerk / 3.0 / dk_max[i]);
             }
+        }
+        if centripetal.is_finite() {
+            v = v.min(centripetal.sqrt());
+        }
+        if rate.is_finite() {
+            v = v.min(rate.cbrt());
         }
         // The 3·a·v·κ_i jerk term, given the speed limit just found.
         for i in 0..9 {
