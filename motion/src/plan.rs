@@ -924,8 +924,7 @@ impl<'k> Planner<'k> {
             }
             if n == 1 {
                 if last {
-                    let a = self.pending.pop_front().expect("one waiting");
-                    self.emit(self.settled(&a), 0.0);
+                    self.release_front(0.0);
                 }
                 return;
             }
@@ -937,8 +936,7 @@ impl<'k> Planner<'k> {
                 // No blend here, or none fits: stop (or go straight on) at
                 // the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
-                let a = self.pending.pop_front().expect("two waiting");
-                self.emit(self.settled(&a), exit);
+                self.release_front(exit);
                 continue;
             };
             let a = &self.pending[0];
@@ -959,10 +957,10 @@ impl<'k> Planner<'k> {
             // Equal tangents and curvatures meet at both ends of the blend;
             // a consumed line leaves nothing (or rounding) between blends.
             if a.segment.length > 1e-9 * a.full_length().max(1.0) {
-                let segment = self.settled(&self.pending[0]);
-                self.emit(segment, f64::INFINITY);
+                self.release_front(f64::INFINITY);
+            } else {
+                self.pending.pop_front();
             }
-            self.pending.pop_front();
             let b = self.pending.front_mut().expect("b waits");
             let mut b_line = b.line.expect("a line");
             b_line.start = std::array::from_fn(|i| corner[i] + legs.1 * u2[i]);
@@ -1075,7 +1073,7 @@ impl<'k> Planner<'k> {
     }
 
     /// A segment of `shape` whose path limits are still to be worked out
-    /// (NaN) by [`settled`](Self::settled).
+    /// (NaN) by [`release_front`](Self::release_front).
     fn segment_unlimited(&self, kind: SegmentKind, line: u32, shape: Shape) -> Segment {
         let feed = match kind {
             SegmentKind::Feed => self.feed(),
@@ -1096,18 +1094,29 @@ impl<'k> Planner<'k> {
         }
     }
 
-    /// The segment of waiting move `p`, with its limits. A line's limits
-    /// come from the line as programmed: trimming does not turn it.
-    fn settled(&self, p: &Pending) -> Segment {
-        let mut segment = p.segment;
-        if let (true, Some(programmed)) = (segment.max_velocity.is_nan(), &p.programmed) {
-            let shape = Shape::Line(programmed.line);
-            let (v, a, j) = self.path_limits(&shape, programmed.length, None);
-            segment.max_velocity = v;
-            segment.max_acceleration = a;
-            segment.max_jerk = j;
+    /// Emit the first waiting move with junction speed cap `exit`, with
+    /// its limits if still due (lines: from the line as programmed, since
+    /// trimming does not turn it). Copied once, straight into the ready
+    /// queue, and finished there.
+    fn release_front(&mut self, exit: f64) {
+        let p = &self.pending[0];
+        if p.segment.length > 0.0 {
+            let limits = match (p.segment.max_velocity.is_nan(), &p.programmed) {
+                (true, Some(programmed)) => {
+                    Some(self.path_limits(&Shape::Line(programmed.line), programmed.length, None))
+                }
+                _ => None,
+            };
+            self.ready.push_back(p.segment);
+            let segment = self.ready.back_mut().expect("just pushed");
+            if let Some((v, a, j)) = limits {
+                segment.max_velocity = v;
+                segment.max_acceleration = a;
+                segment.max_jerk = j;
+            }
+            segment.exit_velocity = segment.max_velocity.min(exit);
         }
-        segment
+        self.pending.pop_front();
     }
 
     /// [`segment`](Self::segment) with a blend's extremes, if known.
