@@ -921,7 +921,7 @@ impl<'k> Planner<'k> {
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let (la, lb) = (pa.line, pb.line);
+        let (la, lb) = (&pa.line, &pb.line);
         let (u1, u2) = (&pa.direction, &pb.direction);
         let corner = la.end;
         let control = Blend::hermite_control(
@@ -939,8 +939,8 @@ impl<'k> Planner<'k> {
         let scale = legs.0 + legs.1;
         // 3 % kept back for the peak between samples.
         let (tolerance, min_speed) = (0.97 * tolerance, 0.3 * scale);
-        let proven = hull_bounds(&control, &la, &lb, tolerance, min_speed);
-        (proven.all() || sampled_within(&control, &la, &lb, tolerance, min_speed, &proven))
+        let proven = hull_bounds(&control, la, lb, tolerance, min_speed);
+        (proven.all() || sampled_within(&control, la, lb, tolerance, min_speed, &proven))
             .then_some(control)
     }
 
