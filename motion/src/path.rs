@@ -241,13 +241,13 @@ impl Blend {
     }
 
     /// The blend with these control points, with its arc-length table, and
-    /// its frames at [`SAMPLES`] + 1 evenly spaced parameters, which the
-    /// planner needs for its limits: one pass of polynomial evaluations
-    /// gives both.
+    /// the extremes of its tangent, curvature and curvature rate over
+    /// [`SAMPLES`] + 1 evenly spaced parameters, which the planner needs for
+    /// its limits: one pass of polynomial evaluations gives both.
     ///
-    /// The sample arc lengths only scale the rate of change of curvature
-    /// between samples, which the planner pads by 25 % anyway; they agree
-    /// with the table to about 1e-8 of the length.
+    /// The arc lengths between samples only scale the rate of change of
+    /// curvature, which the planner pads by 25 % anyway; they agree with the
+    /// table to about 1e-8 of the length.
     pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
         // The same code compiled for AVX where the processor has it: twice
         // the parameters per instruction. Without FMA every operation rounds
