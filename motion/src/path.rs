@@ -50,8 +50,8 @@ pub struct Arc {
     pub end: Vec9,
 }
 
-/// Intervals of a blend's arc-length table. Five-point Gauss–Legendre on
-/// eighths of a quintic corner is exact to about 1e-12 of its length.
+/// Intervals of a blend's arc-length table (see [`Blend::sampled`] for how
+/// it is integrated).
 pub const TABLE: usize = 8;
 
 /// A G2-continuous corner blend: a quintic Bézier whose first three and
@@ -237,12 +237,149 @@ impl Blend {
 
     /// The blend with these control points, with its arc-length table.
     pub fn from_control(control: [Vec9; 6]) -> Blend {
+        Blend::sampled(control).0
+    }
+
+    /// The blend with these control points, with its arc-length table, and
+    /// the extremes of its tangent, curvature and curvature rate over
+    /// [`SAMPLES`] + 1 evenly spaced parameters, which the planner needs for
+    /// its limits: one pass of polynomial evaluations gives both.
+    ///
+    /// The arc lengths between samples only scale the rate of change of
+    /// curvature, which the planner pads by 25 % anyway; they agree with the
+    /// table to about 1e-8 of the length.
+    pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
+        // The same code compiled for AVX where the processor has it: twice
+        // the parameters per instruction. Without FMA every operation rounds
+        // as in the baseline build, so the results are the same bit for bit.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor supports AVX, checked just above.
+            return unsafe { Blend::sampled_avx(control) };
+        }
+        Blend::sampled_here(control)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn sampled_avx(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
+        Blend::sampled_here(control)
+    }
+
+    /// [`sampled`](Self::sampled) for whatever instruction set the caller
+    /// is compiled for (inlined into it).
+    #[inline(always)]
+    fn sampled_here(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
+        // Loops over arrays of parameters, one axis at a time, so that the
+        // compiler evaluates several parameters per instruction (exclusive
+        // ranges: inclusive ones keep loops from being vectorised).
+        const N: usize = SAMPLES + 1;
+        const U: [f64; N] = {
+            let mut u = [0.0; N];
+            let mut k = 0;
+            while k < N {
+                u[k] = k as f64 / SAMPLES as f64;
+                k += 1;
+            }
+            u
+        };
+        let poly = Poly::new(&control);
+        let mut d1 = [[0.0; N]; 3];
+        let mut d2 = [[0.0; N]; 3];
+        for i in 0..3 {
+            let (c1, c2) = (&poly.d1[i], &poly.d2[i]);
+            for k in 0..N {
+                let u = U[k];
+                d1[i][k] = (((c1[4] * u + c1[3]) * u + c1[2]) * u + c1[1]) * u + c1[0];
+                d2[i][k] = ((c2[3] * u + c2[2]) * u + c2[1]) * u + c2[0];
+            }
+        }
+        let mut speed = [0.0; N];
+        let mut inv = [0.0; N];
+        for k in 0..N {
+            speed[k] = (d1[0][k] * d1[0][k] + d1[1][k] * d1[1][k] + d1[2][k] * d1[2][k]).sqrt();
+            inv[k] = 1.0 / speed[k];
+        }
+        // t = d1/|d1|, and d²p/ds² = (d2 − (d2·t) t) / |d1|² in the Bézier
+        // parameter; d2·t is also d|d1|/du.
+        let mut tangent = [[0.0; N]; 3];
+        let mut curvature = [[0.0; N]; 3];
+        let mut along = [0.0; N];
+        for i in 0..3 {
+            for k in 0..N {
+                tangent[i][k] = d1[i][k] * inv[k];
+                along[k] += d2[i][k] * tangent[i][k];
+            }
+        }
+        for i in 0..3 {
+            for k in 0..N {
+                curvature[i][k] = (d2[i][k] - along[k] * tangent[i][k]) * (inv[k] * inv[k]);
+            }
+        }
+        // Arc length between samples by the trapezoidal rule with its
+        // end-derivative correction (Euler–Maclaurin), which the speeds and
+        // their derivatives at the samples give for free: error O(h⁵),
+        // as Simpson's rule.
+        let h = 1.0 / SAMPLES as f64;
+        let mut inv_ds = [0.0; SAMPLES];
+        for k in 0..SAMPLES {
+            let ds = h / 2.0 * (speed[k] + speed[k + 1]) + h * h / 12.0 * (along[k] - along[k + 1]);
+            inv_ds[k] = if ds > 0.0 { 1.0 / ds } else { 0.0 };
+        }
+        // Plain comparisons rather than f64::max, whose NaN rules cost
+        // more (no NaN here).
+        let larger = |m: f64, x: f64| if x > m { x } else { m };
+        let mut out = BlendExtremes {
+            tangent: [0.0; 3],
+            curvature: [0.0; 3],
+            curvature_rate: [0.0; 3],
+        };
+        for i in 0..3 {
+            let (t, c) = (&tangent[i], &curvature[i]);
+            let (mut tm, mut km, mut rm) = (t[0].abs(), c[0].abs(), 0.0);
+            for k in 0..SAMPLES {
+                tm = larger(tm, t[k + 1].abs());
+                km = larger(km, c[k + 1].abs());
+                rm = larger(rm, (c[k + 1] - c[k]).abs() * inv_ds[k]);
+            }
+            (out.tangent[i], out.curvature[i], out.curvature_rate[i]) = (tm, km, rm);
+        }
+        // The table by five-point Gauss–Legendre on each interval: the same
+        // rule `parameter` integrates with inside an interval, so the
+        // arc-length parametrisation is continuous across table entries.
+        // All intervals' nodes in one array, as above.
+        const G: usize = 5 * TABLE;
+        const NODES: ([f64; G], [f64; G]) = {
+            let half = 0.5 / TABLE as f64;
+            let (mut node, mut weight) = ([0.0; G], [0.0; G]);
+            let mut k = 0;
+            while k < G {
+                node[k] = (2 * (k / 5) + 1) as f64 * half + GAUSS_X[k % 5] * half;
+                weight[k] = GAUSS_W[k % 5] * half;
+                k += 1;
+            }
+            (node, weight)
+        };
+        let (node, weight) = (&NODES.0, &NODES.1);
+        let mut v = [[0.0; G]; 3];
+        for i in 0..3 {
+            let c = &poly.d1[i];
+            for k in 0..G {
+                let u = node[k];
+                v[i][k] = (((c[4] * u + c[3]) * u + c[2]) * u + c[1]) * u + c[0];
+            }
+        }
+        let mut weighted = [0.0; G];
+        for k in 0..G {
+            let norm = (v[0][k] * v[0][k] + v[1][k] * v[1][k] + v[2][k] * v[2][k]).sqrt();
+            weighted[k] = weight[k] * norm;
+        }
         let mut b = Blend::untabled(control);
         for i in 0..TABLE {
-            let (u0, u1) = (i as f64 / TABLE as f64, (i + 1) as f64 / TABLE as f64);
-            b.table[i + 1] = b.table[i] + b.speed_integral(u0, u1);
+            let w = &weighted[5 * i..5 * i + 5];
+            b.table[i + 1] = b.table[i] + (w[0] + w[1] + w[2] + w[3] + w[4]);
         }
-        b
+        (b, out)
     }
 
     /// The blend without its arc-length table: enough for
@@ -257,24 +394,7 @@ impl Blend {
 
     /// |d B / du| (the hodograph's length), cheaper than [`derivatives`].
     pub fn speed(&self, u: f64) -> f64 {
-        let q = &self.control;
-        let w = 1.0 - u;
-        let b4 = [
-            w * w * w * w,
-            4.0 * u * w * w * w,
-            6.0 * u * u * w * w,
-            4.0 * u * u * u * w,
-            u * u * u * u,
-        ];
-        (0..3)
-            .map(|i| {
-                (0..5)
-                    .map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i]))
-                    .sum::<f64>()
-                    .powi(2)
-            })
-            .sum::<f64>()
-            .sqrt()
+        Poly::new(&self.control).speed(u)
     }
 
     /// Point, unit tangent and curvature vector at Bézier parameter `u`.
@@ -294,7 +414,7 @@ impl Blend {
     pub fn length_to(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
         let i = ((u * TABLE as f64) as usize).min(TABLE - 1);
-        self.table[i] + self.speed_integral(i as f64 / TABLE as f64, u)
+        self.table[i] + Poly::new(&self.control).speed_integral(i as f64 / TABLE as f64, u)
     }
 
     /// Distance from the corner to the blend's midpoint, which is the blend's
@@ -307,63 +427,22 @@ impl Blend {
     /// Point, first and second derivative in the Bézier parameter. Blends
     /// join XYZ-only lines, so only X Y Z vary; the other axes stay put.
     fn derivatives(&self, u: f64) -> (Vec9, Vec9, Vec9) {
-        let q = &self.control;
-        let w = 1.0 - u;
-        let (u2, w2) = (u * u, w * w);
-        let b5 = bernstein5(u);
-        let b4 = [
-            w2 * w2,
-            4.0 * u * w2 * w,
-            6.0 * u2 * w2,
-            4.0 * u2 * u * w,
-            u2 * u2,
-        ];
-        let b3 = [w2 * w, 3.0 * u * w2, 3.0 * u2 * w, u2 * u];
-        let mut p = q[0];
+        let poly = Poly::new(&self.control);
+        let (p3, d13, d23) = (poly.point(u), poly.d1(u), poly.d2(u));
+        let mut p = self.control[0];
         let mut d1 = [0.0; 9];
         let mut d2 = [0.0; 9];
-        for i in 0..3 {
-            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
-            d1[i] = (0..5).map(|k| 5.0 * b4[k] * (q[k + 1][i] - q[k][i])).sum();
-            d2[i] = (0..4)
-                .map(|k| 20.0 * b3[k] * (q[k + 2][i] - 2.0 * q[k + 1][i] + q[k][i]))
-                .sum();
-        }
+        p[..3].copy_from_slice(&p3);
+        d1[..3].copy_from_slice(&d13);
+        d2[..3].copy_from_slice(&d23);
         (p, d1, d2)
     }
 
     /// Point at Bézier parameter `u` (X Y Z vary, as in [`derivatives`]).
     pub fn point_at_parameter(&self, u: f64) -> Vec9 {
-        let q = &self.control;
-        let b5 = bernstein5(u);
-        let mut p = q[0];
-        for i in 0..3 {
-            p[i] = (0..6).map(|k| b5[k] * q[k][i]).sum();
-        }
+        let mut p = self.control[0];
+        p[..3].copy_from_slice(&Poly::new(&self.control).point(u));
         p
-    }
-
-    /// Arc length between parameters u0 and u1 (5-point Gauss–Legendre).
-    fn speed_integral(&self, u0: f64, u1: f64) -> f64 {
-        const X: [f64; 5] = [
-            0.0,
-            -0.538_469_310_105_683,
-            0.538_469_310_105_683,
-            -0.906_179_845_938_664,
-            0.906_179_845_938_664,
-        ];
-        const W: [f64; 5] = [
-            0.568_888_888_888_889,
-            0.478_628_670_499_366,
-            0.478_628_670_499_366,
-            0.236_926_885_056_189,
-            0.236_926_885_056_189,
-        ];
-        let (mid, half) = ((u0 + u1) / 2.0, (u1 - u0) / 2.0);
-        (0..5)
-            .map(|k| W[k] * norm(&self.derivatives(mid + half * X[k]).1))
-            .sum::<f64>()
-            * half
     }
 
     /// Total arc length.
@@ -379,6 +458,7 @@ impl Blend {
         if s >= self.length() {
             return 1.0;
         }
+        let poly = Poly::new(&self.control);
         let i = self.table.partition_point(|&t| t <= s).clamp(1, TABLE) - 1;
         let (s0, s1) = (self.table[i], self.table[i + 1]);
         let u0 = i as f64 / TABLE as f64;
@@ -389,14 +469,120 @@ impl Blend {
                 0.0
             };
         for _ in 0..3 {
-            let err = s0 + self.speed_integral(u0, u) - s;
-            let speed = self.speed(u);
+            let err = s0 + poly.speed_integral(u0, u) - s;
+            let speed = poly.speed(u);
             if speed <= 0.0 {
                 break;
             }
             u = (u - err / speed).clamp(0.0, 1.0);
         }
         u
+    }
+}
+
+/// Five-point Gauss–Legendre nodes on -1..1, and their weights.
+const GAUSS_X: [f64; 5] = [
+    0.0,
+    -0.538_469_310_105_683,
+    0.538_469_310_105_683,
+    -0.906_179_845_938_664,
+    0.906_179_845_938_664,
+];
+const GAUSS_W: [f64; 5] = [
+    0.568_888_888_888_889,
+    0.478_628_670_499_366,
+    0.478_628_670_499_366,
+    0.236_926_885_056_189,
+    0.236_926_885_056_189,
+];
+
+/// Parameter intervals of [`Blend::sampled`].
+pub const SAMPLES: usize = 32;
+
+/// The largest values along a blend, per axis X Y Z, that the planner's
+/// limits depend on, from its frames at u = k/SAMPLES, k = 0..=SAMPLES.
+#[derive(Clone, Copy, Debug)]
+pub struct BlendExtremes {
+    /// Largest |t_i| of the unit tangent.
+    pub tangent: [f64; 3],
+    /// Largest |κ_i| of the curvature vector.
+    pub curvature: [f64; 3],
+    /// Largest |Δκ_i / Δs| between neighbouring samples.
+    pub curvature_rate: [f64; 3],
+}
+
+/// X, Y and Z of a blend as polynomials in the Bézier parameter (power
+/// basis), with their first and second derivatives: converted once from the
+/// control points, each evaluation is then a few multiply-adds per axis.
+/// Blends join XYZ-only lines, so the other axes stay put.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Poly {
+    /// `p[i][k]`: coefficient of u^k in axis i.
+    p: [[f64; 6]; 3],
+    d1: [[f64; 5]; 3],
+    d2: [[f64; 4]; 3],
+}
+
+impl Poly {
+    pub(crate) fn new(q: &[Vec9; 6]) -> Poly {
+        // Bernstein to power basis: c_k = C(5, k)·Δ^k Q_0.
+        const BINOMIAL: [f64; 6] = [1.0, 5.0, 10.0, 10.0, 5.0, 1.0];
+        let mut poly = Poly {
+            p: [[0.0; 6]; 3],
+            d1: [[0.0; 5]; 3],
+            d2: [[0.0; 4]; 3],
+        };
+        for i in 0..3 {
+            let mut d = [q[0][i], q[1][i], q[2][i], q[3][i], q[4][i], q[5][i]];
+            for k in 0..6 {
+                poly.p[i][k] = BINOMIAL[k] * d[0];
+                for j in 0..5 - k {
+                    d[j] = d[j + 1] - d[j];
+                }
+            }
+            for k in 0..5 {
+                poly.d1[i][k] = (k + 1) as f64 * poly.p[i][k + 1];
+            }
+            for k in 0..4 {
+                poly.d2[i][k] = (k + 1) as f64 * poly.d1[i][k + 1];
+            }
+        }
+        poly
+    }
+
+    fn horner<const N: usize>(c: &[f64; N], u: f64) -> f64 {
+        let mut r = c[N - 1];
+        for k in (0..N - 1).rev() {
+            r = r * u + c[k];
+        }
+        r
+    }
+
+    pub(crate) fn point(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.p[i], u))
+    }
+
+    pub(crate) fn d1(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.d1[i], u))
+    }
+
+    pub(crate) fn d2(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| Self::horner(&self.d2[i], u))
+    }
+
+    /// |dB/du|.
+    pub(crate) fn speed(&self, u: f64) -> f64 {
+        let d = self.d1(u);
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    }
+
+    /// Arc length between parameters u0 and u1 (5-point Gauss–Legendre).
+    fn speed_integral(&self, u0: f64, u1: f64) -> f64 {
+        let (mid, half) = ((u0 + u1) / 2.0, (u1 - u0) / 2.0);
+        (0..5)
+            .map(|k| GAUSS_W[k] * self.speed(mid + half * GAUSS_X[k]))
+            .sum::<f64>()
+            * half
     }
 }
 
@@ -499,20 +685,6 @@ impl Shape {
     }
 }
 
-/// The six quintic Bernstein polynomials at `u`.
-fn bernstein5(u: f64) -> [f64; 6] {
-    let w = 1.0 - u;
-    let (u2, w2) = (u * u, w * w);
-    [
-        w2 * w2 * w,
-        5.0 * u * w2 * w2,
-        10.0 * u2 * w2 * w,
-        10.0 * u2 * u * w2,
-        5.0 * u2 * u2 * w,
-        u2 * u2 * u,
-    ]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -529,6 +701,32 @@ mod tests {
             std::array::from_fn(|i| (c[i] - a[i]) / (2.0 * h)),
             std::array::from_fn(|i| (c[i] - 2.0 * b[i] + a[i]) / (h * h)),
         )
+    }
+
+    #[test]
+    fn sampling_gives_the_same_bits_with_and_without_avx() {
+        for (k, leg) in [(0.0, 2.0), (0.3, 0.5), (-1.5, 0.01)] {
+            let th: f64 = 1.1;
+            let u_out = v(th.cos(), th.sin(), 0.2);
+            let n = norm(&u_out);
+            let u_out: Vec9 = std::array::from_fn(|i| u_out[i] / n);
+            let c = Blend::hermite_control(
+                &v(150.0 - leg, 100.0, -3.0),
+                &v(1.0, 0.0, 0.0),
+                &v(0.0, k, 0.0),
+                &add(&v(150.0, 100.0, -3.0), &u_out, leg),
+                &u_out,
+                &[0.0; 9],
+                2.0 * leg,
+            );
+            let (a, x) = Blend::sampled(c);
+            let (b, y) = Blend::sampled_here(c);
+            assert_eq!(a, b);
+            assert_eq!(
+                (x.tangent, x.curvature, x.curvature_rate),
+                (y.tangent, y.curvature, y.curvature_rate)
+            );
+        }
     }
 
     #[test]
