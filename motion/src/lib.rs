@@ -10,6 +10,8 @@
 //! * [`exec`]: the [`Executor`], which advances along planned segments one
 //!   servo period at a time with jerk-limited path speed. It is real-time
 //!   safe: no allocation, no locks, no I/O.
+//! * [`bound`]: a time-optimal lower bound on cycle time along a planned
+//!   path, for benchmarks and tests only (not used by the controller).
 //! * [`control`]: the per-joint position loop (PD + feedforward) the servo
 //!   runs on the host; [`fuzzy`]: the cutting-force feed-override
 //!   controller. Plain state and arithmetic, real-time safe.
@@ -18,6 +20,7 @@
 // iterator chains over four zipped arrays would read worse.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bound;
 pub mod control;
 pub mod exec;
 pub mod fuzzy;
