@@ -25,6 +25,7 @@ pub mod control;
 pub mod exec;
 pub mod fuzzy;
 pub mod kinematics;
+pub mod merge;
 pub mod offline;
 pub mod path;
 pub mod plan;

@@ -373,7 +373,10 @@ pub fn run(
         let time = ticks as f64 * dt;
         let p = sample.position.to_array();
         // Deviation: distance to the nearest programmed move around the
-        // executing line (blends sit between two moves).
+        // executing line (blends sit between two moves). A line merged
+        // under G64 Q carries the last of the lines it stands for, so keep
+        // the moves as far behind as the segments being run reach.
+        programmed.keep_back = queue.iter().take(3).map(|s| s.length).sum();
         if let Some(near) = programmed.distance(&sample.position, sample.line) {
             if near > report.max_deviation {
                 report.max_deviation = near;
