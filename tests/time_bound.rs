@@ -73,6 +73,28 @@ fn a_line_from_rest_to_rest_takes_the_trapezoid_time() {
 }
 
 #[test]
+fn dwells_and_exact_stops_stop_the_tool_and_dwells_add_their_time() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    // Collinear moves run through at speed unless a dwell stops them.
+    let through = bound("G1 X60 F6000\nX110\nM2\n", kins, start);
+    let want = trapezoid(100.0, 100.0, 1500.0);
+    assert!(
+        (through.time / want - 1.0).abs() < 0.005,
+        "{}",
+        through.time
+    );
+    let dwell = bound("G1 X60 F6000\nG4 P0.5\nG1 X110\nM2\n", kins, start);
+    let want = 2.0 * trapezoid(50.0, 100.0, 1500.0) + 0.5;
+    assert!(
+        (dwell.time / want - 1.0).abs() < 0.005,
+        "{} vs {want}",
+        dwell.time
+    );
+}
+
+#[test]
 fn a_circle_above_its_cornering_speed_runs_at_sqrt_a_r() {
     let machine = mill3();
     let kins = &*machine.kinematics;

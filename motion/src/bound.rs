@@ -15,7 +15,7 @@
 //! the same, and the jerk limit is dropped. The stops are the same: the
 //! planner's own stops (exit speed 0 — exact stop, unblended corners,
 //! program end) and the markers that stand still (dwell, immediate output,
-//! input wait). Any trajectory the executor could follow is feasible here,
+//! input wait); dwell times are added. Any trajectory the executor could follow is feasible here,
 //! so none is faster than the optimum found here.
 //!
 //! Method (Bobrow / TOPP-RA style): with x = v² and u = dv/dt = ½ dx/ds, a
@@ -103,7 +103,7 @@ struct Node {
     line: bool,
 }
 
-/// The result: the optimal speed profile and its time.
+/// The result: the optimal speed profile and its time (dwells included).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Profile {
     /// Cycle time of the optimal profile, s.
@@ -129,6 +129,8 @@ pub struct TimeBound<'k> {
     last_tangent: Vec<f64>,
     /// Whether the last node must be at rest.
     rest: bool,
+    /// Dwells (G4), s: standing still is part of the cycle.
+    dwell: f64,
 }
 
 impl<'k> TimeBound<'k> {
@@ -165,6 +167,7 @@ impl<'k> TimeBound<'k> {
             nodes: Vec::new(),
             geometry: Vec::new(),
             rest: true,
+            dwell: 0.0,
         }
     }
 
@@ -269,6 +272,9 @@ impl<'k> TimeBound<'k> {
     pub fn push(&mut self, segment: &Segment) {
         if !segment.is_motion() {
             // Markers stand still (dwell, stop, output, input wait).
+            if let SegmentKind::Dwell { seconds } = segment.kind {
+                self.dwell += seconds.max(0.0);
+            }
             if let Some(last) = self.nodes.last_mut() {
                 last.xmax = 0.0;
             }
@@ -358,7 +364,10 @@ impl<'k> TimeBound<'k> {
         let nodes = &self.nodes;
         let n = nodes.len();
         if n == 0 {
-            return Profile::default();
+            return Profile {
+                time: self.dwell,
+                ..Profile::default()
+            };
         }
         let m = self.coords.len();
         let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
@@ -386,7 +395,7 @@ impl<'k> TimeBound<'k> {
             x[k] = x[k].min((x[k + 1] - 2.0 * ds * lo).max(0.0));
         }
         let v: Vec<f64> = x.iter().map(|x| x.max(0.0).sqrt()).collect();
-        let mut time = 0.0;
+        let mut time = self.dwell;
         let mut s = Vec::with_capacity(n);
         let mut at = 0.0;
         for k in 0..n {
