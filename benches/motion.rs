@@ -236,7 +236,7 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics) {
     let [av, aa, aj] = worst(&report.axes);
     let [jv, ja, jj] = worst(&report.joints);
     println!(
-        "{name:<28} {:>9.3} s {:>9.3} s {:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s",
+        "{name:<33} {:>9.3} s {:>9.3} s {:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s",
         report.cycle_time,
         bound,
         report.cycle_time / bound,
@@ -265,7 +265,7 @@ fn main() {
     println!("deviation from the programmed path; largest use of the axis and joint");
     println!("velocity, acceleration and jerk limits (must stay <= 1 + 1e-6)");
     println!(
-        "{:<28} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8}",
+        "{:<33} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8}",
         "program", "planned", "bound", "ratio", "poly", "deviation",
         "ax v", "ax a", "ax j", "jt v", "jt a", "jt j", "run", "bound"
     );
@@ -274,5 +274,9 @@ fn main() {
     quality("spiral 0.02 mm, 20k seg", &spiral(20_000), kins);
     if let Some(text) = &stellabee {
         quality("stellabee1.ngc (G64 P0.01)", text, kins);
+        // The same with LinuxCNC's collinear merge (G64 Q, merge.rs).
+        let merged = text.replacen("\nG64 \n", "\nG64 P0.01 Q0.01\n", 1);
+        assert_ne!(&merged, text, "stellabee1.ngc has its G64 line");
+        quality("stellabee1.ngc (G64 P0.01 Q0.01)", &merged, kins);
     }
 }
