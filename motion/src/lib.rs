@@ -6,7 +6,8 @@
 //!   arc length.
 //! * [`plan`]: the planner, which turns [`kerf_interp::Canon`] into
 //!   [`Segment`]s with their limits. It runs ahead of the machine and may
-//!   allocate.
+//!   allocate. In front of its line handling, [`merge`] joins runs of
+//!   nearly collinear straight feeds into one line (G64 Q).
 //! * [`exec`]: the [`Executor`], which advances along planned segments one
 //!   servo period at a time with jerk-limited path speed. It is real-time
 //!   safe: no allocation, no locks, no I/O.
