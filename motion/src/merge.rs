@@ -324,6 +324,12 @@ mod tests {
     }
 
     #[test]
+    fn a_rotary_move_is_never_merged_and_ends_the_chain() {
+        let got = lines("G21 G90 G64 P0.01 Q0.01 F600\nG1 X1\nX2\nX3 A10\nX4\nX5\n");
+        assert_eq!(got, vec![(2.0, 0.0, 3), (3.0, 0.0, 4), (5.0, 0.0, 6)]);
+    }
+
+    #[test]
     fn a_flat_g17_arc_joins_the_chain_and_a_round_one_ends_it() {
         // R 1000 over 1 mm: sagitta 0.000125 mm, below Q.
         let flat = "G21 G90 G64 P0.01 Q0.01 F600\nG1 X5\nG17 G2 X6 R1000\nG1 X10\n";
