@@ -6,10 +6,13 @@
 //!   arc length.
 //! * [`plan`]: the planner, which turns [`kerf_interp::Canon`] into
 //!   [`Segment`]s with their limits. It runs ahead of the machine and may
-//!   allocate.
+//!   allocate. In front of its line handling, [`merge`] joins runs of
+//!   nearly collinear straight feeds into one line (G64 Q).
 //! * [`exec`]: the [`Executor`], which advances along planned segments one
 //!   servo period at a time with jerk-limited path speed. It is real-time
 //!   safe: no allocation, no locks, no I/O.
+//! * [`bound`]: a time-optimal lower bound on cycle time along a planned
+//!   path, for benchmarks and tests only (not used by the controller).
 //! * [`control`]: the per-joint position loop (PD + feedforward) the servo
 //!   runs on the host; [`fuzzy`]: the cutting-force feed-override
 //!   controller. Plain state and arithmetic, real-time safe.
@@ -18,10 +21,12 @@
 // iterator chains over four zipped arrays would read worse.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bound;
 pub mod control;
 pub mod exec;
 pub mod fuzzy;
 pub mod kinematics;
+pub mod merge;
 pub mod offline;
 pub mod path;
 pub mod plan;

@@ -126,12 +126,14 @@ struct Programmed {
 /// Moves are added as the program is read, ahead of the machine; moves
 /// more than `keep_back` mm of path behind the executing line are dropped
 /// (at least one move before it is always kept: blends sit between two
-/// moves).
+/// moves), and only moves on lines up to [`PathWindow::keep_after`].
 #[derive(Clone, Debug)]
 pub struct PathWindow {
     moves: VecDeque<Programmed>,
     last_end: Vec9,
     keep_back: f64,
+    /// Moves on this line or before may be dropped.
+    floor: u32,
 }
 
 impl PathWindow {
@@ -142,7 +144,17 @@ impl PathWindow {
             moves: VecDeque::new(),
             last_end: start.to_array(),
             keep_back,
+            floor: u32::MAX,
         }
+    }
+
+    /// Keep every move on a line after `line`, however far behind. A line
+    /// merged under G64 Q carries the last of the source lines it stands
+    /// for, so while it runs the tool can be far from the executing line's
+    /// own move: the caller names the line of the segment before the one
+    /// the tool last finished, whose moves it has surely left.
+    pub fn keep_after(&mut self, line: u32) {
+        self.floor = line;
     }
 
     /// Record the move of `canon`, if it is one; returns the XYZ points it
@@ -217,7 +229,7 @@ impl PathWindow {
                 break;
             }
             let behind: f64 = self.moves.iter().take(before).skip(1).map(length).sum();
-            if behind < self.keep_back {
+            if behind < self.keep_back || self.moves[0].line > self.floor {
                 break;
             }
             self.moves.pop_front();
@@ -311,6 +323,8 @@ pub fn run(
     let mut executor = Executor::new(start);
     let mut report = Report::default();
     let mut programmed = PathWindow::new(start, 0.0);
+    // Source lines of the last two motion segments finished (distinct).
+    let mut finished = [0u32; 2];
     let njoints = kins.joints().len();
 
     let axis_specs = kins.axes().to_vec();
@@ -368,12 +382,18 @@ pub fn run(
         // offline environment answers it), so a wait never holds.
         executor.release_input();
         let sample = executor.tick(dt, a, b);
-        queue.drain(..sample.consumed);
+        for s in queue.drain(..sample.consumed) {
+            if s.is_motion() && s.line != finished[1] {
+                finished = [finished[1], s.line];
+            }
+        }
         ticks += 1;
         let time = ticks as f64 * dt;
         let p = sample.position.to_array();
         // Deviation: distance to the nearest programmed move around the
-        // executing line (blends sit between two moves).
+        // executing line (blends sit between two moves, and lines merged
+        // under G64 Q stand for many).
+        programmed.keep_after(finished[0]);
         if let Some(near) = programmed.distance(&sample.position, sample.line) {
             if near > report.max_deviation {
                 report.max_deviation = near;

@@ -14,6 +14,7 @@ use std::collections::VecDeque;
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
+use crate::merge::{CollinearMerge, MergeContext, Verdict};
 use crate::path::{norm, Arc, Blend, BlendExtremes, Line, Poly, Shape, Vec9};
 
 /// What a segment does.
@@ -296,6 +297,8 @@ pub struct Planner<'k> {
     position: Position,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
+    /// G64 Q: straight feeds held for merging (merge.rs).
+    merge: CollinearMerge,
 }
 
 /// Path limits the joints impose on one segment (see `Planner::joint_limits`).
@@ -493,6 +496,7 @@ impl<'k> Planner<'k> {
             position: start,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
+            merge: CollinearMerge::new(),
         }
     }
 
@@ -503,6 +507,7 @@ impl<'k> Planner<'k> {
 
     /// Set the path control mode for the following moves.
     pub fn set_mode(&mut self, mode: PathMode) {
+        self.release_merged();
         self.mode = mode;
     }
 
@@ -511,6 +516,7 @@ impl<'k> Planner<'k> {
     /// force-control M-code (`docs/control.md`) is to call; it travels with
     /// the segments, so it takes effect in step with the motion.
     pub fn set_force_control(&mut self, newtons: Option<f64>) {
+        self.release_merged();
         self.force_control = newtons;
     }
 
@@ -522,7 +528,19 @@ impl<'k> Planner<'k> {
     /// Release every waiting move, the last ending at rest (program end,
     /// dwell, or anything else that stops the machine).
     pub fn finish(&mut self) {
+        self.release_merged();
         self.drain(true);
+    }
+
+    /// Plan the moves held for a G64 Q merge. Each was checked against the
+    /// machine as it came, so on a machine whose joints follow its axes the
+    /// merged line fits too; on others a merged line that fails the planner's
+    /// sampled checks is dropped here (see docs/motion.md).
+    fn release_merged(&mut self) {
+        self.merge.flush();
+        while let Some(merged) = self.merge.take() {
+            let _ = self.command(&merged);
+        }
     }
 
     /// Plan one canon command. Segments become available from
@@ -533,6 +551,46 @@ impl<'k> Planner<'k> {
     /// After an error the planner carries on from the move's end, so a
     /// check can report every violation of a program.
     pub fn plan(&mut self, canon: &Canon) -> Result<(), PlanError> {
+        // G64 Q (merge.rs): runs of nearly collinear straight feeds are held
+        // and planned as one line. A move that leaves the machine is not
+        // held, so its error names its own line.
+        let verdict = if self.merge.tolerance() > 0.0 && !self.fits(canon) {
+            self.merge.flush();
+            Verdict::Pass
+        } else {
+            let ctx = MergeContext {
+                at: self.position,
+                continuous: matches!(self.mode, PathMode::Blend { .. }),
+                feed_ok: self.feed() > 0.0,
+            };
+            self.merge.see(canon, &ctx)
+        };
+        let mut result = Ok(());
+        while let Some(merged) = self.merge.take() {
+            result = result.and(self.command(&merged));
+        }
+        if verdict == Verdict::Pass {
+            result = result.and(self.command(canon));
+        }
+        result
+    }
+
+    /// For a straight or arc feed, whether the straight move to its end
+    /// from the last held or planned point passes the planner's checks.
+    fn fits(&self, canon: &Canon) -> bool {
+        let end = match &canon.cmd {
+            CanonCmd::StraightFeed { end } | CanonCmd::ArcFeed { end, .. } => end,
+            _ => return true,
+        };
+        let start = self.merge.last().unwrap_or(self.position);
+        let line = Line {
+            start: start.to_array(),
+            end: end.to_array(),
+        };
+        self.check_shape(canon, &Shape::Line(line)).is_ok()
+    }
+
+    fn command(&mut self, canon: &Canon) -> Result<(), PlanError> {
         let line = canon.source.line;
         let unsupported = |what: &str| {
             Err(self.error(canon, format!("{what} is not supported by the planner yet")))
@@ -661,6 +719,7 @@ impl<'k> Planner<'k> {
             | CanonCmd::SetXYRotation { .. }
             | CanonCmd::UseToolLengthOffset { .. }
             | CanonCmd::SelectPlane(_)
+            // G64 Q: the merge in front (merge.rs) has taken it.
             | CanonCmd::SetNaivecamTolerance { .. }
             | CanonCmd::SetPlannerMode { .. }
             | CanonCmd::StopSpeedFeedSync

@@ -1,0 +1,211 @@
+//! The time-optimal lower bound (`kerf_motion::bound`) against closed forms
+//! and against the planner and executor it is meant to bound.
+
+#[path = "../benches/programs.rs"]
+mod programs;
+
+use kerf_interp::{Interpreter, Position};
+use kerf_motion::bound::{lower_bound, BoundConfig, Profile};
+use kerf_motion::offline::{self, plan_program, RunConfig};
+use kerf_motion::{Kinematics, PathMode, PlannerConfig};
+
+fn mill3() -> kerf_machines::Machine {
+    kerf_machines::load("mill3").unwrap()
+}
+
+fn config() -> PlannerConfig {
+    PlannerConfig {
+        mode: PathMode::Blend { tolerance: 0.01 },
+        ..PlannerConfig::default()
+    }
+}
+
+fn bound(program: &str, kins: &dyn Kinematics, start: Position) -> Profile {
+    let segments = plan_program(
+        Interpreter::from_text(program, "t.ngc", start),
+        kins,
+        start,
+        config(),
+        1,
+    )
+    .unwrap();
+    lower_bound(&segments, kins, BoundConfig::default())
+}
+
+/// Rest-to-rest time over `len` with speed cap `v` and acceleration `a`.
+fn trapezoid(len: f64, v: f64, a: f64) -> f64 {
+    if v * v / a >= len {
+        2.0 * (len / a).sqrt()
+    } else {
+        len / v + v / a
+    }
+}
+
+#[test]
+fn a_line_from_rest_to_rest_takes_the_trapezoid_time() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    // Along X at F6000: 100 mm/s, 1500 mm/s².
+    let p = bound("G1 X210 F6000\nM2\n", kins, start);
+    let want = trapezoid(200.0, 100.0, 1500.0);
+    assert!((p.time / want - 1.0).abs() < 0.005, "{} vs {want}", p.time);
+    // Diagonal X Y Z, rapid: every axis limit divides by its direction
+    // cosine; Z (100 mm/s, 1000 mm/s²) binds.
+    let (dx, dy, dz): (f64, f64, f64) = (120.0, 90.0, -60.0);
+    let len = (dx * dx + dy * dy + dz * dz).sqrt();
+    let t = [dx / len, dy / len, dz / len];
+    let limits = [(150.0, 1500.0), (150.0, 1500.0), (100.0, 1000.0)];
+    let v = (0..3)
+        .map(|i| limits[i].0 / t[i].abs())
+        .fold(f64::INFINITY, f64::min);
+    let a = (0..3)
+        .map(|i| limits[i].1 / t[i].abs())
+        .fold(f64::INFINITY, f64::min);
+    let p = bound("G0 X130 Y100 Z-70\nM2\n", kins, start);
+    let want = trapezoid(len, v, a);
+    assert!((p.time / want - 1.0).abs() < 0.005, "{} vs {want}", p.time);
+    // Too short to reach the feed: a triangle.
+    let p = bound("G1 X12 F6000\nM2\n", kins, start);
+    let want = trapezoid(2.0, 100.0, 1500.0);
+    assert!(want < 2.0 / 100.0 + 100.0 / 1500.0 - 1e-3);
+    assert!((p.time / want - 1.0).abs() < 0.005, "{} vs {want}", p.time);
+}
+
+#[test]
+fn dwells_and_exact_stops_stop_the_tool_and_dwells_add_their_time() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    // Collinear moves run through at speed unless a dwell stops them.
+    let through = bound("G1 X60 F6000\nX110\nM2\n", kins, start);
+    let want = trapezoid(100.0, 100.0, 1500.0);
+    assert!(
+        (through.time / want - 1.0).abs() < 0.005,
+        "{}",
+        through.time
+    );
+    let dwell = bound("G1 X60 F6000\nG4 P0.5\nG1 X110\nM2\n", kins, start);
+    let want = 2.0 * trapezoid(50.0, 100.0, 1500.0) + 0.5;
+    assert!(
+        (dwell.time / want - 1.0).abs() < 0.005,
+        "{} vs {want}",
+        dwell.time
+    );
+}
+
+#[test]
+fn a_circle_above_its_cornering_speed_runs_at_sqrt_a_r() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    for (plane, text, a_eff) in [
+        ("G17", "G17 G2 X155 Y100 I-5 J0 P4 F9000\nM2\n", 1500.0),
+        ("G18", "G18 G2 X155 Z-20 I-5 K0 P4 F9000\nM2\n", 1000.0),
+    ] {
+        let start = Position::xyz(155.0, 100.0, -20.0);
+        let p = bound(text, kins, start);
+        let r: f64 = 5.0;
+        let len = 4.0 * 2.0 * std::f64::consts::PI * r;
+        // Per-axis limits: at the points where the tangent is along one axis,
+        // the other carries all the centripetal acceleration, v²/R ≤ A; in
+        // between, the two axes share it and the optimum runs faster. The
+        // slowest point is sqrt(A_eff·R), A_eff the weaker axis of the plane.
+        // Middle two turns, away from the start and end ramps.
+        let mid: Vec<f64> =
+            p.s.iter()
+                .zip(&p.v)
+                .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
+                .map(|(_, v)| *v)
+                .collect();
+        let lo = mid.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = mid.iter().copied().fold(0.0, f64::max);
+        let want = (a_eff * r).sqrt();
+        assert!((lo / want - 1.0).abs() < 0.005, "{plane}: {lo} vs {want}");
+        // Nowhere faster than both axes' limits together allow:
+        // v² ≤ (A_1·|t_2| + A_2·|t_1|)·R ≤ √2 · 1500 · R.
+        let top = (2f64.sqrt() * 1500.0 * r).sqrt();
+        assert!(hi <= top * 1.001 && hi > want, "{plane}: {hi} vs {top}");
+    }
+}
+
+/// Planned (executed offline) cycle time and the bound, for `program`.
+fn planned_and_bound(program: &str, kins: &dyn Kinematics) -> (f64, f64) {
+    let run = offline::run(
+        Interpreter::from_text(program, "t.ngc", Position::ZERO),
+        kins,
+        Position::ZERO,
+        RunConfig {
+            planner: config(),
+            record: 0,
+        },
+    )
+    .unwrap();
+    (run.cycle_time, bound(program, kins, Position::ZERO).time)
+}
+
+#[test]
+fn the_bound_is_below_the_planned_cycle_time() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let mut programs = vec![
+        ("circle", programs::circle_small_segments()),
+        ("zig-zag", programs::zigzag_pocket()),
+    ];
+    // The first 4000 lines of stellabee1.ngc (its G18 arcs and dense
+    // lines; the whole file is a benchmark row, too slow for a debug test).
+    match programs::stellabee() {
+        Some(text) => {
+            let head: Vec<&str> = text.lines().take(4000).collect();
+            programs.push(("stellabee", head.join("\n") + "\nM2\n"));
+        }
+        None => eprintln!("stellabee1.ngc not under ../shared; skipped"),
+    }
+    for (name, text) in programs {
+        let (planned, bound) = planned_and_bound(&text, kins);
+        eprintln!("{name}: planned {planned:.3} s, bound {bound:.3} s");
+        assert!(bound.is_finite() && bound > 0.0, "{name}: bound {bound}");
+        assert!(
+            bound <= planned,
+            "{name}: bound {bound} > planned {planned}"
+        );
+    }
+}
+
+#[test]
+fn joints_of_non_trivial_kinematics_limit_the_bound() {
+    // CoreXY: motor a = x + y. On a 45° rapid it turns at √2 times the
+    // path speed, so its 300 mm/s and 4500 mm/s² bind before the axes'
+    // 200·√2 mm/s and 3000·√2 mm/s².
+    let machine = kerf_machines::load("corexy").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let p = bound("G0 X110 Y110\nM2\n", kins, start);
+    let root2 = 2f64.sqrt();
+    let want = trapezoid(100.0 * root2, 300.0 / root2, 4500.0 / root2);
+    assert!((p.time / want - 1.0).abs() < 0.005, "{} vs {want}", p.time);
+    // The same machine with motors weaker than the axes (2000 mm/s²) on a
+    // circle of R = 5 mm at a feed it cannot reach. The motors see the
+    // circle turned by 45°: the pair (a, b) allows v² ≤ A·R·max(|cos θ|,
+    // |sin θ|), least on the diagonals, where motor a alone carries the
+    // centripetal acceleration: sqrt(2000 · 5 / √2). The axes alone would
+    // allow sqrt(3000 · 5).
+    let text = include_str!("../machines/corexy.toml").replace(
+        "max_velocity = 300.0\nmax_acceleration = 4500.0",
+        "max_velocity = 300.0\nmax_acceleration = 2000.0",
+    );
+    let weak = kerf_machines::from_toml(&text, "corexy-weak").unwrap();
+    let p = bound(
+        "G17 G2 X15 Y10 I-5 J0 P4 F30000\nM2\n",
+        &*weak.kinematics,
+        Position::xyz(15.0, 10.0, -10.0),
+    );
+    let len = 4.0 * 2.0 * std::f64::consts::PI * 5.0;
+    let lo =
+        p.s.iter()
+            .zip(&p.v)
+            .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
+            .map(|(_, v)| *v)
+            .fold(f64::INFINITY, f64::min);
+    let want = (2000.0 * 5.0 / root2).sqrt();
+    assert!((lo / want - 1.0).abs() < 0.005, "{lo} vs {want}");
+}
