@@ -1320,10 +1320,15 @@ impl<'k> Planner<'k> {
                         &owned
                     }
                 };
-                t_max[..3].copy_from_slice(&extremes.tangent);
                 k_max[..3].copy_from_slice(&extremes.curvature);
+                // A tangent component peaks between samples by at most
+                // |dκ/ds|·(Δs/2)²/2 (its slope κ is zero at the peak); the
+                // samples are at most about length/16 apart.
+                let half_gap = length / 32.0;
                 for i in 0..3 {
                     dk_max[i] = 1.25 * extremes.curvature_rate[i];
+                    t_max[i] =
+                        (extremes.tangent[i] + dk_max[i] * half_gap * half_gap / 2.0).min(1.0);
                 }
             }
         }
