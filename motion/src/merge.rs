@@ -218,6 +218,11 @@ impl CollinearMerge {
         }
     }
 
+    /// Start of the chain of held moves, if any.
+    pub fn first(&self) -> Option<Position> {
+        (!self.points.is_empty()).then(|| Position::from_array(self.start))
+    }
+
     /// End of the last held move, if any.
     pub fn last(&self) -> Option<Position> {
         self.points.last().map(|p| Position::from_array(*p))

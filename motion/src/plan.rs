@@ -555,14 +555,15 @@ impl<'k> Planner<'k> {
         self.drain(true);
     }
 
-    /// Plan the moves held for a G64 Q merge. Each was checked against the
-    /// machine as it came, so on a machine whose joints follow its axes the
-    /// merged line fits too; on others a merged line that fails the planner's
-    /// sampled checks is dropped here (see docs/motion.md).
+    /// Plan the moves held for a G64 Q merge. The merged line was checked
+    /// against the machine each time the chain grew (`fits`,
+    /// `merged_fits`), and the feed was above zero, so planning it cannot
+    /// fail; the result is not needed.
     fn release_merged(&mut self) {
         self.merge.flush();
         while let Some(merged) = self.merge.take() {
-            let _ = self.command(&merged);
+            let planned = self.command(&merged);
+            debug_assert!(planned.is_ok(), "a checked merged line failed: {planned:?}");
         }
     }
 
@@ -581,6 +582,12 @@ impl<'k> Planner<'k> {
             self.merge.flush();
             Verdict::Pass
         } else {
+            // The merged line must fit too (on a machine whose reach is not
+            // a box, a chord can leave it where the moves did not): if it
+            // would not, what is held goes as it is and a new chain starts.
+            if !self.merge.is_empty() && !self.merged_fits(canon) {
+                self.merge.flush();
+            }
             let ctx = MergeContext {
                 at: self.position,
                 continuous: matches!(self.mode, PathMode::Blend { .. }),
@@ -606,6 +613,20 @@ impl<'k> Planner<'k> {
             _ => return true,
         };
         let start = self.merge.last().unwrap_or(self.position);
+        let line = Line {
+            start: start.to_array(),
+            end: end.to_array(),
+        };
+        self.check_shape(canon, &Shape::Line(line)).is_ok()
+    }
+
+    /// For a straight feed, whether the line from the start of the held
+    /// chain to its end passes the planner's checks: the line it would
+    /// merge into.
+    fn merged_fits(&self, canon: &Canon) -> bool {
+        let (CanonCmd::StraightFeed { end }, Some(start)) = (&canon.cmd, self.merge.first()) else {
+            return true;
+        };
         let line = Line {
             start: start.to_array(),
             end: end.to_array(),
@@ -1463,6 +1484,75 @@ mod tests {
         }
         p.finish();
         std::iter::from_fn(|| p.next_segment()).collect()
+    }
+
+    /// X Y Z that cannot reach within `hole` mm of X50 Y0 (a column on the
+    /// table): a reach that is not convex, and joints the planner must
+    /// sample through the inverse kinematics.
+    struct Column {
+        xyz: crate::testkit::Xyz,
+        hole: f64,
+    }
+
+    impl Kinematics for Column {
+        fn name(&self) -> &str {
+            "column"
+        }
+        fn axes(&self) -> &[crate::kinematics::AxisSpec] {
+            self.xyz.axes()
+        }
+        fn joints(&self) -> &[crate::kinematics::JointSpec] {
+            self.xyz.joints()
+        }
+        fn inverse(&self, p: &Position, q: &mut [f64]) -> Result<(), crate::KinematicsError> {
+            if (p.x - 50.0).hypot(p.y) < self.hole {
+                return Err(crate::KinematicsError::Unreachable {
+                    reason: "inside the column",
+                });
+            }
+            self.xyz.inverse(p, q)
+        }
+        fn forward(&self, q: &[f64], seed: &Position) -> Result<Position, crate::KinematicsError> {
+            self.xyz.forward(q, seed)
+        }
+    }
+
+    #[test]
+    fn a_collinear_merge_never_cuts_through_what_the_machine_cannot_reach() {
+        // Moves of 0.05 mm along an arc 0.02 mm outside a column of radius
+        // 10. Under Q0.05 chords over up to 0.2 rad would merge, but any
+        // over 0.13 rad dips into the column, though every move is clear:
+        // the merge must stop short of them, and planning must not fail.
+        let kins = Column {
+            xyz: xyz(100.0, 1000.0, 50_000.0),
+            hole: 10.0,
+        };
+        let r = 10.02;
+        let x = 50.0 + r;
+        let mut text = format!("G21 G90 G64 P0.01 Q0.05\nG0 X{x} Y-30\nY0\nG1 F1000\n");
+        let steps = 120;
+        for k in 1..=steps {
+            let a = k as f64 * 0.005;
+            text += &format!("X{:.6} Y{:.6}\n", 50.0 + r * a.cos(), r * a.sin());
+        }
+        text += "M2\n";
+        let segs = plan(&kins, PlannerConfig::default(), &text);
+        let moves = segs.iter().filter(|s| s.is_motion()).count();
+        assert!(
+            moves < steps / 3,
+            "merging happened: {moves} segments for {steps} moves"
+        );
+        for seg in segs.iter().filter(|s| s.is_motion()) {
+            for k in 0..=64 {
+                let p = seg.position_at(seg.length * k as f64 / 64.0);
+                let from_axis = (p.x - 50.0).hypot(p.y);
+                assert!(
+                    from_axis >= 10.0 - 1e-9,
+                    "line {} passes {from_axis:.4} mm from the column's axis",
+                    seg.line
+                );
+            }
+        }
     }
 
     #[test]
