@@ -319,3 +319,44 @@ fn the_jerk_constraint_binds_a_ramp_from_rest_onto_a_curve() {
     );
     assert!(got > free * 1.03, "{got} vs {free}");
 }
+
+/// Discretisation study (not run by default): the bound at ds = 0.01 mm
+/// against finer steps. `cargo test --release --test time_bound -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn discretisation() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let mut programs = vec![
+        ("circle", programs::circle_small_segments()),
+        ("zig-zag", programs::zigzag_pocket()),
+        ("spiral", programs::spiral(20_000)),
+    ];
+    if let Some(text) = programs::stellabee() {
+        let head: Vec<&str> = text.lines().take(20000).collect();
+        programs.push(("stellabee", head.join("\n") + "\nM2\n"));
+    }
+    for (name, text) in programs {
+        let mut times = Vec::new();
+        for ds in [0.01, 0.0025, 0.000625] {
+            let b = bound_with(
+                &text,
+                kins,
+                Position::ZERO,
+                BoundConfig {
+                    ds,
+                    ..BoundConfig::default()
+                },
+            );
+            times.push(b.time);
+        }
+        let j0 = bound_with(&text, kins, Position::ZERO, no_jerk()).time;
+        eprintln!(
+            "{name}: no jerk {j0:.4}, ds 0.01 {:.4}, 0.0025 {:.4}, 0.000625 {:.4} ({:+.3} %)",
+            times[0],
+            times[1],
+            times[2],
+            (times[0] / times[2] - 1.0) * 100.0
+        );
+    }
+}

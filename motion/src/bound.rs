@@ -1,22 +1,24 @@
 //! A lower bound on cycle time for benchmarks and tests: time-optimal path
 //! parameterisation (TOPP) of the planned path under velocity and
-//! acceleration limits only.
+//! acceleration limits and a necessary condition of the jerk limits.
 //!
 //! Not used by the controller. The planner decides the path (lines, arcs,
 //! corner blends); the executor decides, online, how fast to go along it.
 //! This module answers: how fast could *any* trajectory go along that same
-//! path if it only had to respect the programmed feed and each axis's (and
-//! joint's) velocity and acceleration limit? It shares nothing with the
-//! executor's velocity profile, so a planned cycle time divided by this
-//! bound measures how much time the executor's profile gives away.
+//! path if it only had to respect the programmed feed, each axis's (and
+//! joint's) velocity and acceleration limit, and the part of each axis's
+//! jerk limit that the path's geometry alone imposes? It shares nothing
+//! with the executor's velocity profile, so a planned cycle time divided by
+//! this bound measures how much time the executor's profile gives away.
 //!
 //! Why it is a lower bound: it solves a relaxation of the executor's
 //! problem. The path is the same, the velocity and acceleration limits are
-//! the same, and the jerk limit is dropped. The stops are the same: the
-//! planner's own stops (exit speed 0 — exact stop, unblended corners,
-//! program end) and the markers that stand still (dwell, immediate output,
-//! input wait); dwell times are added. Any trajectory the executor could follow is feasible here,
-//! so none is faster than the optimum found here.
+//! the same, and of the jerk limits only necessary conditions are kept
+//! (below). The stops are the same: the planner's own stops (exit speed 0 —
+//! exact stop, unblended corners, program end) and the markers that stand
+//! still (dwell, immediate output, input wait); dwell times are added. Any
+//! trajectory the executor could follow is feasible here, so none is faster
+//! than the optimum found here.
 //!
 //! Method (Bobrow / TOPP-RA style): with x = v² and u = dv/dt = ½ dx/ds, a
 //! coordinate c with tangent t_c = dc/ds and curvature κ_c = d²c/ds² moves
@@ -34,11 +36,49 @@
 //! accelerates as hard as the interval allows, a backward pass decelerates
 //! as hard as it allows (both integrating dx/ds = 2u by Heun's method), and
 //! the time is Σ 2·ds / (v_k + v_{k+1}) (exact trapezoids on lines).
+//! Each of the three (maximum-velocity curve, forward, backward) is an
+//! upper bound on x of every feasible trajectory, so their minimum is too.
 //!
-//! Coordinates are the machine's axes, with the limits of joints that move
-//! exactly with an axis folded in (as the planner does), and the joints of
-//! non-trivial kinematics through the inverse kinematics: q′ and q″ by
-//! central differences along the osculating parabola p + h·t + ½h²·κ.
+//! Jerk on curves. The axis jerk along p(s) is p‴ = p′·s⃛ + 3·p″·v·u +
+//! p‴(s)·v³ (p‴(s) = d³p/ds³, κ′ on an arc-length parameter). On the unit
+//! normal n (the part of p″ orthogonal to p′, where there is one) the
+//! unknown s⃛ drops out: j·n = 3·(κ·n)·v·u + (p‴·n)·v³, and with every axis
+//! within |j_i| ≤ J_i, |j·n| ≤ Σ_i J_i·|n_i| =: J_n. So every trajectory
+//! whose axis jerk stays within its limits at every instant has
+//!
+//! * |3·(κ·n)·v·u + (p‴·n)·v³| ≤ J_n,
+//!
+//! for given x an interval of u, intersected with the acceleration
+//! interval in both passes. p‴·n is analytic: on arcs from θ and r linear
+//! in s (0 on circles and helices, where p‴ = −w²·p′ in the plane, so a
+//! circle's cruise speed is unchanged and only the ramps slow down), on
+//! blends d|κ|/ds from the quintic's third derivative. In the
+//! maximum-velocity curve the condition enters relaxed, to keep a closed
+//! form: with U bounding the |u| that could offset p‴·n·v³ anywhere in the
+//! acceleration-feasible range of x, |p‴·n|·v³ ≤ J_n + 3·(κ·n)·U·v (a
+//! cubic with one positive root, found by Newton from above). Lines have
+//! no normal and no jerk condition; the tangential jerk (with s⃛) is not
+//! bounded at all; joints of non-trivial kinematics get none (they would
+//! only add conditions). `BoundConfig::jerk = false` drops all of this,
+//! for a planner run with `jerk_limited: false`.
+//!
+//! What "within its limits" means here: at every instant, as the planner's
+//! per-segment limits guarantee for the executor (its path limits keep
+//! j·t_i + 3·a·v·κ_i + v³·κ′_i ≤ J_i pointwise). A sampled trajectory
+//! judged only by 1 ms finite differences could pass a feature shorter
+//! than v·T faster, since the differences average the jerk over 3 ms; the
+//! bound does not allow for that.
+//!
+//! Junctions where the curvature jumps (line to arc, arc to arc) step the
+//! axis acceleration by v²·Δκ_i, an unbounded jerk in continuous time. The
+//! planner passes them at v²·|Δκ_i| ≤ J_i·T (one servo period T). Sampled
+//! every T, a step Δa shows a third difference of Δa/(2T) at the least
+//! (when it falls on a sample; 3Δa/(4T) midway), and the rest of the
+//! motion's jerk, within J_i, could offset at most J_i of it; so a
+//! trajectory measured within J_i at the servo period has v²·|Δκ_i| ≤
+//! 4·J_i·T, and the bound caps the junction speed there
+//! (`JUNCTION_SLACK` = 4, twice the planner's speed): looser than the
+//! planner, so the bound stays below it.
 //!
 //! Junctions the planner passes through at speed may still bend the tangent
 //! by rounding (up to 1e-6). In continuous time that would force a stop; the
