@@ -362,8 +362,10 @@ impl<'k> TimeBound<'k> {
     }
 
     /// The normal jerk constraint at `frame`, given p‴·n by `third` (a
-    /// function of the unit normal n).
-    fn jerk_at(&self, frame: &Frame, third: impl Fn(&Vec9) -> f64) -> Jerk {
+    /// function of the unit normal n). Where the curvature vanishes, n is
+    /// the direction of p‴'s normal part, `straight` (if any): with κ = 0
+    /// the condition is the speed cap |p‴·n|·v³ ≤ J_n.
+    fn jerk_at(&self, frame: &Frame, third: impl Fn(&Vec9) -> f64, straight: Option<Vec9>) -> Jerk {
         let (t, k) = (&frame.tangent, &frame.curvature);
         let tt: f64 = t.iter().map(|x| x * x).sum();
         if tt == 0.0 {
@@ -372,8 +374,27 @@ impl<'k> TimeBound<'k> {
         let along = (0..9).map(|i| k[i] * t[i]).sum::<f64>() / tt;
         let perp: Vec9 = std::array::from_fn(|i| k[i] - along * t[i]);
         let kn = perp.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if kn == 0.0 || !kn.is_finite() {
+        if !kn.is_finite() {
             return Jerk::default();
+        }
+        if kn == 0.0 {
+            let Some(p3) = straight else {
+                return Jerk::default();
+            };
+            let along = (0..9).map(|i| p3[i] * t[i]).sum::<f64>() / tt;
+            let perp: Vec9 = std::array::from_fn(|i| p3[i] - along * t[i]);
+            let d = perp.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if d == 0.0 || !d.is_finite() {
+                return Jerk::default();
+            }
+            let jn: f64 = (0..9)
+                .filter(|&i| perp[i] != 0.0)
+                .map(|i| self.axis_jerk[i] * (perp[i] / d).abs())
+                .sum();
+            if !jn.is_finite() {
+                return Jerk::default();
+            }
+            return Jerk { k3: 0.0, d, jn };
         }
         let n: Vec9 = std::array::from_fn(|i| perp[i] / kn);
         let jn: f64 = (0..9)
@@ -401,7 +422,7 @@ impl<'k> TimeBound<'k> {
     /// convex and negative at 0, so the feasible speeds are [0, v*];
     /// Newton from above stays above v*, so stopping early keeps it a bound.
     fn jerk_max_x(&self, g: &[f64], jerk: &Jerk, xa: f64) -> f64 {
-        if jerk.k3 == 0.0 || jerk.d == 0.0 || !xa.is_finite() || xa <= 0.0 {
+        if jerk.d == 0.0 || !jerk.jn.is_finite() || !xa.is_finite() || xa <= 0.0 {
             return xa;
         }
         let (mut hb, mut lb) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -421,7 +442,14 @@ impl<'k> TimeBound<'k> {
         }
         // d > 0 needs u ≤ (jn − d·v³)/(k3·v), so u ≥ lb must allow it;
         // d < 0 needs u ≥ (|d|·v³ − jn)/(k3·v) below hb.
-        let u = if jerk.d > 0.0 { -lb } else { hb }.max(0.0);
+        let u = if jerk.k3 == 0.0 {
+            0.0
+        } else if jerk.d > 0.0 {
+            -lb
+        } else {
+            hb
+        }
+        .max(0.0);
         if !u.is_finite() {
             return xa;
         }
@@ -527,7 +555,11 @@ impl<'k> TimeBound<'k> {
                     };
                     let frame = b.frame_at_parameter(u);
                     // p‴·n = d|κ|/ds on the arc-length parameter.
-                    let jerk = self.jerk_at(&frame, |_| b.curvature_rate_at_parameter(u));
+                    let jerk = self.jerk_at(
+                        &frame,
+                        |_| b.curvature_rate_at_parameter(u),
+                        Some(b.third_normal_where_straight(u)),
+                    );
                     self.push_node(&frame, jerk, feed, s1 - s0, false);
                     s0 = s1;
                 }
@@ -538,10 +570,14 @@ impl<'k> TimeBound<'k> {
                     let s = segment.length * k as f64 / n as f64;
                     let frame = if k == 0 { first } else { shape.frame(s) };
                     let jerk = match shape {
-                        Shape::Arc(a) => self.jerk_at(&frame, |n| {
-                            let p3 = arc_third(a, s, segment.length);
-                            (0..9).map(|i| p3[i] * n[i]).sum()
-                        }),
+                        Shape::Arc(a) => self.jerk_at(
+                            &frame,
+                            |n| {
+                                let p3 = arc_third(a, s, segment.length);
+                                (0..9).map(|i| p3[i] * n[i]).sum()
+                            },
+                            None,
+                        ),
                         _ => Jerk::default(),
                     };
                     self.push_node(&frame, jerk, feed, if k < n { step } else { 0.0 }, line);

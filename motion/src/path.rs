@@ -437,6 +437,25 @@ impl Blend {
         dk_du / sigma
     }
 
+    /// The part of d³p/ds³ orthogonal to the tangent at Bézier parameter
+    /// `u`, B‴⊥ / σ³ where the curvature vanishes (B″ parallel to B′, as at
+    /// a blend's ends); elsewhere it also has terms in B″.
+    pub fn third_normal_where_straight(&self, u: f64) -> Vec9 {
+        let poly = Poly::new(&self.control);
+        let (d1, d3) = (poly.d1(u), poly.d3(u));
+        let sigma2 = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
+        let mut out = [0.0; 9];
+        if sigma2 == 0.0 {
+            return out;
+        }
+        let along = (d3[0] * d1[0] + d3[1] * d1[1] + d3[2] * d1[2]) / sigma2;
+        let s3 = sigma2 * sigma2.sqrt();
+        for i in 0..3 {
+            out[i] = (d3[i] - along * d1[i]) / s3;
+        }
+        out
+    }
+
     /// Arc length from the start to parameter `u`.
     pub fn length_to(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
@@ -892,5 +911,11 @@ mod tests {
             );
         }
         assert!(largest > 0.1, "{largest}");
+        // At the ends κ = 0 and the rate is the normal part of p‴.
+        for (u, near) in [(0.0, 1e-7), (1.0, 1.0 - 1e-7)] {
+            let end = norm(&b.third_normal_where_straight(u));
+            let rate = b.curvature_rate_at_parameter(near).abs();
+            assert!((end - rate).abs() < 1e-4 * rate, "{end} vs {rate}");
+        }
     }
 }
