@@ -320,6 +320,32 @@ fn the_jerk_constraint_binds_a_ramp_from_rest_onto_a_curve() {
     assert!(got > free * 1.03, "{got} vs {free}");
 }
 
+#[test]
+fn a_curvature_jump_caps_the_junction_at_four_times_the_planners_jerk_budget() {
+    // A line along X into a tangent arc of R = 5 mm: Y's curvature jumps
+    // by 1/5 mm⁻¹. The planner passes at v² = J·T/Δκ (J = 50·1500 mm/s³,
+    // mill3's default, T = 1 ms); a trajectory sampled at T and measured
+    // within J could pass at up to v² = 4·J·T/Δκ, which the bound allows.
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let text = "G1 X20 F6000\nG3 X25 Y15 I0 J5\nM2\n";
+    let speed_at_junction = |p: &Profile| {
+        p.s.iter()
+            .zip(&p.v)
+            .filter(|(s, _)| (**s - 10.0).abs() < 1e-9)
+            .map(|(_, v)| *v)
+            .fold(0.0, f64::max)
+    };
+    let want = (4.0 * 75_000.0 * 0.001 * 5.0f64).sqrt();
+    let got = speed_at_junction(&bound(text, kins, start));
+    assert!((got / want - 1.0).abs() < 0.005, "{got} vs {want}");
+    // Without jerk limits only the arc's own limits (v² ≤ A·R at its
+    // start, where Y carries all of it) hold the speed down.
+    let free = speed_at_junction(&bound_with(text, kins, start, no_jerk()));
+    assert!(free > 1.5 * want, "{free}");
+}
+
 /// Discretisation study (not run by default): the bound at ds = 0.01 mm
 /// against finer steps. `cargo test --release --test time_bound -- --ignored --nocapture`
 #[test]
