@@ -8,13 +8,16 @@
 //! parameterisation of the path the planner produced (its lines, arcs,
 //! helices and corner blends), by forward and backward passes on a 0.01 mm
 //! discretisation, under the same feed, the same axis and joint velocity
-//! and acceleration limits and the same stops, but with no jerk limit.
-//! Dropping a constraint can only make the optimum faster, so no trajectory
-//! along that path within the machine's limits is quicker: it is a lower
-//! bound. "Independent" means independent of the executor's online velocity
-//! profile, which is what the ratio judges; the path itself is the
-//! planner's (blend shapes included), so the ratio does not judge how
-//! the blends use the path tolerance.
+//! and acceleration limits and the same stops, and of the axes' jerk
+//! limits only what the path's bending forces whatever the tangential jerk:
+//! on curves |3·(κ·n)·v·a + (κ′·n)·v³| ≤ Σ J_i·|n_i| (n the unit normal),
+//! at curvature jumps v²·|Δκ_i| ≤ 4·J_i·T (what a 1 ms sampled trajectory
+//! within J_i allows; the planner uses J_i·T). Every trajectory along that
+//! path within the machine's limits meets these necessary conditions, so
+//! none is quicker: it is a lower bound. "Independent" means independent
+//! of the executor's online velocity profile, which is what the ratio
+//! judges; the path itself is the planner's (blend shapes included), so the
+//! ratio does not judge how the blends use the path tolerance.
 //!
 //! The second bound ("poly") is the older estimate on the *programmed*
 //! polyline (straight moves only, so not shown for programs with arcs): a
@@ -261,7 +264,7 @@ fn main() {
         throughput("spiral 0.02 mm, 1M seg", &spiral(1_000_000), kins);
     }
     println!();
-    println!("Time-optimality: planned / bound (TOPP of the planned path, no jerk limit);");
+    println!("Time-optimality: planned / bound (TOPP of the planned path, normal jerk only);");
     println!("deviation from the programmed path; largest use of the axis and joint");
     println!("velocity, acceleration and jerk limits (must stay <= 1 + 1e-6)");
     println!(

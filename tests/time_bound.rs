@@ -21,6 +21,15 @@ fn config() -> PlannerConfig {
 }
 
 fn bound(program: &str, kins: &dyn Kinematics, start: Position) -> Profile {
+    bound_with(program, kins, start, BoundConfig::default())
+}
+
+fn bound_with(
+    program: &str,
+    kins: &dyn Kinematics,
+    start: Position,
+    bound: BoundConfig,
+) -> Profile {
     let segments = plan_program(
         Interpreter::from_text(program, "t.ngc", start),
         kins,
@@ -29,7 +38,14 @@ fn bound(program: &str, kins: &dyn Kinematics, start: Position) -> Profile {
         1,
     )
     .unwrap();
-    lower_bound(&segments, kins, BoundConfig::default())
+    lower_bound(&segments, kins, bound)
+}
+
+fn no_jerk() -> BoundConfig {
+    BoundConfig {
+        jerk: false,
+        ..BoundConfig::default()
+    }
 }
 
 /// Rest-to-rest time over `len` with speed cap `v` and acceleration `a`.
@@ -150,6 +166,7 @@ fn the_bound_is_below_the_planned_cycle_time() {
     let mut programs = vec![
         ("circle", programs::circle_small_segments()),
         ("zig-zag", programs::zigzag_pocket()),
+        ("spiral", programs::spiral(20_000)),
     ];
     // The first 4000 lines of stellabee1.ngc (its G18 arcs and dense
     // lines; the whole file is a benchmark row, too slow for a debug test).
@@ -208,4 +225,164 @@ fn joints_of_non_trivial_kinematics_limit_the_bound() {
             .fold(f64::INFINITY, f64::min);
     let want = (2000.0 * 5.0 / root2).sqrt();
     assert!((lo / want - 1.0).abs() < 0.005, "{lo} vs {want}");
+}
+
+#[test]
+fn the_jerk_constraint_leaves_a_circles_cruise_speed_alone() {
+    // On a circle κ′ = −|κ|²·t, so κ′·n = 0: at constant speed the normal
+    // jerk is 0 and the cruise speed sqrt(A_eff·R) stays. Only the ramps
+    // from and to rest, where 3·|κ|·v·a ≤ J_n limits a, get slower.
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(155.0, 100.0, -20.0);
+    let text = "G17 G2 X155 Y100 I-5 J0 P4 F9000\nM2\n";
+    let with = bound(text, kins, start);
+    let without = bound_with(text, kins, start, no_jerk());
+    let len = 4.0 * 2.0 * std::f64::consts::PI * 5.0;
+    let lowest = |p: &Profile| {
+        p.s.iter()
+            .zip(&p.v)
+            .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
+            .map(|(_, v)| *v)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (a, b) = (lowest(&with), lowest(&without));
+    assert!((a / b - 1.0).abs() < 0.005, "{a} vs {b}");
+    assert!(
+        with.time >= without.time,
+        "{} < {}",
+        with.time,
+        without.time
+    );
+    assert!(
+        with.time < without.time * 1.01,
+        "{} vs {}",
+        with.time,
+        without.time
+    );
+}
+
+#[test]
+fn the_jerk_constraint_binds_a_ramp_from_rest_onto_a_curve() {
+    // Axes with a large acceleration limit (A = 1e5 mm/s²) and a jerk
+    // limit J = 75,000 mm/s³ on a short arc of R = 10 mm around its
+    // X-most point, from rest to rest at F1200 (20 mm/s). The normal n is
+    // within 0.01 rad of −X, so J_n = J·(|n_x| + |n_y|) ≈ J, κ′·n = 0 and
+    // the centripetal v²·κ ≤ 40 mm/s² is next to nothing against A. So
+    // u = A up to v1 = J/(3κA), then 3·κ·v·u = J: v²·dv = J/(3κ)·ds,
+    // which takes 3κ/(2J)·(F² − v1²) over κ·(F³ − v1³)/J. The same down
+    // at the end; F in between.
+    let text = include_str!("../machines/mill3.toml").replace(
+        "max_acceleration = 1500.0",
+        "max_acceleration = 100000.0\nmax_jerk = 75000.0",
+    );
+    let machine = kerf_machines::from_toml(&text, "mill3-stiff").unwrap();
+    let kins = &*machine.kinematics;
+    let (r, phi, feed, j, a) = (10.0_f64, 0.01_f64, 20.0_f64, 75_000.0_f64, 1e5_f64);
+    let (c, s) = (r * phi.cos(), r * phi.sin());
+    let start = Position::xyz(150.0 + c, 100.0 - s, -20.0);
+    let text = format!(
+        "G17 G3 X{:.9} Y{:.9} I{:.9} J{s:.9} F1200\nM2\n",
+        150.0 + c,
+        100.0 + s,
+        -c
+    );
+    let fine = BoundConfig {
+        ds: 1e-4,
+        ..BoundConfig::default()
+    };
+    let len = 2.0 * phi * r;
+    let kappa = 1.0 / r;
+    let v1 = j / (3.0 * kappa * a);
+    let (s1, t1) = (v1 * v1 / (2.0 * a), v1 / a);
+    let s_f = s1 + kappa * (feed.powi(3) - v1.powi(3)) / j;
+    assert!(s_f < len / 4.0 && v1 < feed / 4.0);
+    let ramp = t1 + 1.5 * kappa / j * (feed * feed - v1 * v1);
+    let want = 2.0 * ramp + (len - 2.0 * s_f) / feed;
+    let got = bound_with(&text, kins, start, fine).time;
+    assert!((got / want - 1.0).abs() < 0.005, "{got} vs {want}");
+    // Without the jerk limit the ramps take next to no time.
+    let free = bound_with(
+        &text,
+        kins,
+        start,
+        BoundConfig {
+            jerk: false,
+            ..fine
+        },
+    )
+    .time;
+    let want_free = len / feed + feed / a;
+    assert!(
+        (free / want_free - 1.0).abs() < 0.005,
+        "{free} vs {want_free}"
+    );
+    assert!(got > free * 1.03, "{got} vs {free}");
+}
+
+#[test]
+fn a_curvature_jump_caps_the_junction_at_four_times_the_planners_jerk_budget() {
+    // A line along X into a tangent arc of R = 5 mm: Y's curvature jumps
+    // by 1/5 mm⁻¹. The planner passes at v² = J·T/Δκ (J = 50·1500 mm/s³,
+    // mill3's default, T = 1 ms); a trajectory sampled at T and measured
+    // within J could pass at up to v² = 4·J·T/Δκ, which the bound allows.
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let text = "G1 X20 F6000\nG3 X25 Y15 I0 J5\nM2\n";
+    let speed_at_junction = |p: &Profile| {
+        p.s.iter()
+            .zip(&p.v)
+            .filter(|(s, _)| (**s - 10.0).abs() < 1e-9)
+            .map(|(_, v)| *v)
+            .fold(0.0, f64::max)
+    };
+    let want = (4.0 * 75_000.0 * 0.001 * 5.0f64).sqrt();
+    let got = speed_at_junction(&bound(text, kins, start));
+    assert!((got / want - 1.0).abs() < 0.005, "{got} vs {want}");
+    // Without jerk limits only the arc's own limits (v² ≤ A·R at its
+    // start, where Y carries all of it) hold the speed down.
+    let free = speed_at_junction(&bound_with(text, kins, start, no_jerk()));
+    assert!(free > 1.5 * want, "{free}");
+}
+
+/// Discretisation study (not run by default): the bound at ds = 0.01 mm
+/// against finer steps. `cargo test --release --test time_bound -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn discretisation() {
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let mut programs = vec![
+        ("circle", programs::circle_small_segments()),
+        ("zig-zag", programs::zigzag_pocket()),
+        ("spiral", programs::spiral(20_000)),
+    ];
+    if let Some(text) = programs::stellabee() {
+        let head: Vec<&str> = text.lines().take(20000).collect();
+        programs.push(("stellabee", head.join("\n") + "\nM2\n"));
+    }
+    for (name, text) in programs {
+        let mut times = Vec::new();
+        for ds in [0.01, 0.0025, 0.000625] {
+            let b = bound_with(
+                &text,
+                kins,
+                Position::ZERO,
+                BoundConfig {
+                    ds,
+                    ..BoundConfig::default()
+                },
+            );
+            times.push(b.time);
+        }
+        let j0 = bound_with(&text, kins, Position::ZERO, no_jerk()).time;
+        eprintln!(
+            "{name}: no jerk {j0:.4}, ds 0.01 {:.4}, 0.0025 {:.4}, 0.000625 {:.4} ({:+.3} %)",
+            times[0],
+            times[1],
+            times[2],
+            (times[0] / times[2] - 1.0) * 100.0
+        );
+    }
 }

@@ -410,6 +410,52 @@ impl Blend {
         }
     }
 
+    /// d|κ|/ds at Bézier parameter `u`: the rate of change of the
+    /// curvature's magnitude along the arc length, which is κ′·n (κ′ =
+    /// d³p/ds³, n the unit normal). With B′, B″, B‴ the derivatives in u
+    /// and σ = |B′|: |κ| = |B′ × B″| / σ³, differentiated in u, over σ.
+    /// Zero where the blend is straight (no normal).
+    pub fn curvature_rate_at_parameter(&self, u: f64) -> f64 {
+        let poly = Poly::new(&self.control);
+        let (d1, d2, d3) = (poly.d1(u), poly.d2(u), poly.d3(u));
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ]
+        };
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let c = cross(d1, d2);
+        let dc = cross(d1, d3);
+        let (cn, sigma) = (dot(c, c).sqrt(), dot(d1, d1).sqrt());
+        if cn == 0.0 || sigma == 0.0 {
+            return 0.0;
+        }
+        let s3 = sigma * sigma * sigma;
+        let dk_du = dot(c, dc) / (cn * s3) - 3.0 * cn * dot(d1, d2) / (s3 * sigma * sigma);
+        dk_du / sigma
+    }
+
+    /// The part of d³p/ds³ orthogonal to the tangent at Bézier parameter
+    /// `u`, B‴⊥ / σ³ where the curvature vanishes (B″ parallel to B′, as at
+    /// a blend's ends); elsewhere it also has terms in B″.
+    pub fn third_normal_where_straight(&self, u: f64) -> Vec9 {
+        let poly = Poly::new(&self.control);
+        let (d1, d3) = (poly.d1(u), poly.d3(u));
+        let sigma2 = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
+        let mut out = [0.0; 9];
+        if sigma2 == 0.0 {
+            return out;
+        }
+        let along = (d3[0] * d1[0] + d3[1] * d1[1] + d3[2] * d1[2]) / sigma2;
+        let s3 = sigma2 * sigma2.sqrt();
+        for i in 0..3 {
+            out[i] = (d3[i] - along * d1[i]) / s3;
+        }
+        out
+    }
+
     /// Arc length from the start to parameter `u`.
     pub fn length_to(&self, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
@@ -568,6 +614,15 @@ impl Poly {
 
     pub(crate) fn d2(&self, u: f64) -> [f64; 3] {
         std::array::from_fn(|i| Self::horner(&self.d2[i], u))
+    }
+
+    /// Third derivative, from the second's coefficients (not stored: only
+    /// the lower bound needs it).
+    pub(crate) fn d3(&self, u: f64) -> [f64; 3] {
+        std::array::from_fn(|i| {
+            let c = &self.d2[i];
+            c[1] + u * (2.0 * c[2] + u * 3.0 * c[3])
+        })
     }
 
     /// |dB/du|.
@@ -832,6 +887,35 @@ mod tests {
             for i in 0..3 {
                 assert!((d2[i] - f.curvature[i]).abs() < 1e-3, "curvature at {s}");
             }
+        }
+    }
+
+    #[test]
+    fn blend_curvature_rate_is_the_derivative_of_its_curvature() {
+        let corner = v(10.0, 0.0, 0.0);
+        let u_in = v(1.0, 0.0, 0.0);
+        let u_out = v(0.0, 0.6, 0.8);
+        let b = Blend::corner(&corner, &u_in, &u_out, 2.0);
+        let shape = Shape::Blend(b);
+        let kappa = |s: f64| norm(&shape.frame(s).curvature);
+        let h = 1e-5;
+        let mut largest: f64 = 0.0;
+        for k in 1..20 {
+            let s = shape.length() * k as f64 / 20.0;
+            let want = (kappa(s + h) - kappa(s - h)) / (2.0 * h);
+            let got = b.curvature_rate_at_parameter(b.parameter(s));
+            largest = largest.max(want.abs());
+            assert!(
+                (got - want).abs() < 1e-4 * (1.0 + want.abs()),
+                "{got} vs {want} at {s}"
+            );
+        }
+        assert!(largest > 0.1, "{largest}");
+        // At the ends κ = 0 and the rate is the normal part of p‴.
+        for (u, near) in [(0.0, 1e-7), (1.0, 1.0 - 1e-7)] {
+            let end = norm(&b.third_normal_where_straight(u));
+            let rate = b.curvature_rate_at_parameter(near).abs();
+            assert!((end - rate).abs() < 1e-4 * rate, "{end} vs {rate}");
         }
     }
 }
