@@ -392,7 +392,7 @@ impl Blend {
         }
     }
 
-    /// |d B / du| (the hodograph's length), cheaper than [`derivatives`](Self::derivatives).
+    /// |d B / du| (the hodograph's length), cheaper than computing all three derivatives.
     pub fn speed(&self, u: f64) -> f64 {
         Poly::new(&self.control).speed(u)
     }
@@ -484,7 +484,7 @@ impl Blend {
         (p, d1, d2)
     }
 
-    /// Point at Bézier parameter `u` (X Y Z vary, as in [`derivatives`](Self::derivatives)).
+    /// Point at Bézier parameter `u` (X Y Z vary, as in the derivatives).
     pub fn point_at_parameter(&self, u: f64) -> Vec9 {
         let mut p = self.control[0];
         p[..3].copy_from_slice(&Poly::new(&self.control).point(u));
