@@ -1556,6 +1556,43 @@ mod simulation {
     }
 
     #[test]
+    fn feed_hold_and_abort_stop_within_the_stopping_distance() {
+        // Hold (abort is hold, then the queue is dropped) while speeding up
+        // and while cruising: the tool comes to rest exactly the shortest
+        // jerk-limited stopping distance from where the hold found it,
+        // by the closed form, which a simulation checks separately.
+        for hold_at in [15, 30, 400] {
+            let mut q = planned("G1 X200 F3000\nM2\n", PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |n, ex| {
+                if n == hold_at {
+                    ex.set_hold(true);
+                }
+                if n == hold_at + 400 {
+                    ex.set_hold(false);
+                }
+            });
+            let before = out[hold_at - 1];
+            let rest = out[hold_at + 300];
+            assert_eq!(rest.velocity, 0.0, "at rest by then");
+            let travelled = rest.position.x - before.position.x;
+            let expected = braking_distance(
+                before.velocity,
+                before.acceleration,
+                0.0,
+                LIMITS.max_acceleration,
+                LIMITS.max_jerk,
+            );
+            assert!(
+                (travelled - expected).abs() < 1e-6,
+                "hold at tick {hold_at} (v {}, a {}): stopped after {travelled} mm, \
+                 shortest stop {expected} mm",
+                before.velocity,
+                before.acceleration
+            );
+        }
+    }
+
+    #[test]
     fn feed_override_scales_the_cruise_speed() {
         let mut q = planned("G1 X200 F3000\nM2\n", PathMode::Blend { tolerance: 0.01 });
         let out = run(&mut q, |n, ex| {
