@@ -203,6 +203,10 @@ pub struct PlannerConfig {
     /// curves (0 to 1); the rest is left for speeding up and slowing down
     /// along them.
     pub centripetal_share: f64,
+    /// Share of each axis's jerk given to the v³·κ′ term on curves (0 to
+    /// 1); the tangential j·t and coupling 3·a·v·κ terms get half the rest
+    /// each.
+    pub jerk_rate_share: f64,
     /// Path tolerance for G64 without P, mm (LinuxCNC: unlimited).
     pub default_tolerance: f64,
     /// Digital outputs the machine has (M62–M65 P must be below).
@@ -222,6 +226,7 @@ impl Default for PlannerConfig {
             mode: PathMode::Blend { tolerance: 0.01 },
             jerk_limited: true,
             centripetal_share: 0.5,
+            jerk_rate_share: 1.0 / 3.0,
             default_tolerance: 0.01,
             digital_outputs: MAX_DIGITAL_OUTPUTS,
             analog_outputs: MAX_ANALOG_OUTPUTS,
@@ -1285,9 +1290,10 @@ impl<'k> Planner<'k> {
     ///
     /// Along a line, axis i moves at t_i times the path motion, so each limit
     /// divides by |t_i|. On a curve, axis acceleration is a·t_i + v²·κ_i and
-    /// axis jerk is j·t_i + 3·a·v·κ_i + v³·κ'_i; the budget is split, half
-    /// and half for acceleration and in thirds for jerk, which bounds the
-    /// sum by the limit.
+    /// axis jerk is j·t_i + 3·a·v·κ_i + v³·κ'_i; the budget is split
+    /// (acceleration by [`PlannerConfig::centripetal_share`], jerk by
+    /// [`PlannerConfig::jerk_rate_share`], by default in thirds), which
+    /// bounds the sum by the limit.
     ///
     /// `extremes` are a blend's ([`Blend::sampled`]) when the caller has them.
     fn path_limits(
@@ -1329,10 +1335,9 @@ impl<'k> Planner<'k> {
                 }
             }
             Shape::Blend(b) => {
-                // 32 samples; dκ/ds by differences between them. On a sharp
-                // corner the curvature peak is narrow: the largest rate
-                // between samples can exceed the sampled differences, so
-                // they get a 25 % allowance.
+                // 32 samples for |t_i| and |κ_i|; |dκ_i/ds| exact at 65
+                // with an allowance for crests between them (see
+                // `BlendExtremes::curvature_rate`).
                 let owned;
                 let extremes = match extremes {
                     Some(extremes) => extremes,
@@ -1347,7 +1352,7 @@ impl<'k> Planner<'k> {
                 // samples are at most about length/16 apart.
                 let half_gap = length / 32.0;
                 for i in 0..3 {
-                    dk_max[i] = 1.25 * extremes.curvature_rate[i];
+                    dk_max[i] = extremes.curvature_rate[i];
                     t_max[i] =
                         (extremes.tangent[i] + dk_max[i] * half_gap * half_gap / 2.0).min(1.0);
                 }
@@ -1367,7 +1372,11 @@ impl<'k> Planner<'k> {
                     1.0
                 };
                 a = a.min(share * l.max_acceleration / t_max[i]);
-                let jshare = if curved { 1.0 / 3.0 } else { 1.0 };
+                let jshare = if curved {
+                    (1.0 - self.config.jerk_rate_share) / 2.0
+                } else {
+                    1.0
+                };
                 j = j.min(jshare * l.max_jerk / t_max[i]);
             }
             if k_max[i] > 0.0 {
@@ -1375,7 +1384,7 @@ impl<'k> Planner<'k> {
                     centripetal.min(self.config.centripetal_share * l.max_acceleration / k_max[i]);
             }
             if dk_max[i] > 0.0 && l.max_jerk.is_finite() {
-                rate = rate.min(l.max_jerk / 3.0 / dk_max[i]);
+                rate = rate.min(self.config.jerk_rate_share * l.max_jerk / dk_max[i]);
             }
         }
         if centripetal.is_finite() {
@@ -1388,7 +1397,8 @@ impl<'k> Planner<'k> {
         for i in 0..9 {
             let Some(l) = self.limits[i] else { continue };
             if k_max[i] > 0.0 && l.max_jerk.is_finite() && v.is_finite() && v > 0.0 {
-                a = a.min(l.max_jerk / 3.0 / (3.0 * v * k_max[i]));
+                let share = (1.0 - self.config.jerk_rate_share) / 2.0;
+                a = a.min(share * l.max_jerk / (3.0 * v * k_max[i]));
             }
         }
         if self.sample_joints {
