@@ -195,14 +195,17 @@ fn joints_stay_within_their_limits_on_the_5_axis_platform() {
 /// motion entered the last line too fast to stop in it (limit use ≈ 340).
 #[test]
 fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(
-        &dir,
-        "steep.ngc",
+    plans_within_limits(
         "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18\nF999\n\
          G0 X0.4200 Y2.4420 Z-0.1859\nG1 X0.4260 Z-0.1755\nX0.4300 Z-0.0726\n\
          X0.4360 Z-0.0049\nM2\n",
     );
+}
+
+/// `kerf plan --json` on mill3 measures limit use at most 1 + 1e-6.
+fn plans_within_limits(text: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "stretch.ngc", text);
     let out = kerf(&["plan", &p, "--json"]);
     assert!(out.status.success());
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -218,10 +221,7 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
 /// below its speed, and the jerk search does that braking.
 #[test]
 fn two_blends_with_falling_limits_before_a_stop_stay_within_limits() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(
-        &dir,
-        "falling.ngc",
+    plans_within_limits(
         "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18 G94\nF999\n\
          G0 X1.1240 Z-0.2203\nG1 X1.1200 Z-0.2291\nX1.1120 Z-0.2314\nX1.1100 Z-0.2304\n\
          G3 X1.1060 Y0.6020 Z-0.1941 I0.2535 K0.0463\n\
@@ -229,11 +229,6 @@ fn two_blends_with_falling_limits_before_a_stop_stay_within_limits() {
          G1 X1.1000 Z-0.1059\nX1.0960 Z-0.1069\nX1.0940 Z-0.1255\nX1.0920 Z-0.1932\n\
          X1.0900 Z-0.1980\nX1.0880 Z-0.1990\nM2\n",
     );
-    let out = kerf(&["plan", &p, "--json"]);
-    assert!(out.status.success());
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let ratio = json["max_limit_ratio"].as_f64().unwrap();
-    assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
 }
 
 #[test]

@@ -654,18 +654,16 @@ impl Executor {
                     if dist > 0.0 && limit > 0.0 && limit < lowest * (1.0 - 1e-9) {
                         lowest = limit;
                         // Acceleration left at the junction is eased off in
-                        // the next segment, under its jerk limit.
-                        let jn = q
+                        // the next segment, under its jerk limit; braking
+                        // through the cap enters it decelerating, within
+                        // its acceleration limit too.
+                        let (an, jn) = q
                             .get(k + 1)
                             .filter(|n| n.is_motion())
-                            .map_or(jmax, |n| jmax.min(n.max_jerk));
+                            .map_or((amax, jmax), |n| {
+                                (amax.min(n.max_acceleration), jmax.min(n.max_jerk))
+                            });
                         let crest = v + a.max(0.0).powi(2) / (2.0 * jn);
-                        // Braking through the cap enters the next segment
-                        // decelerating: within its limit too.
-                        let an = q
-                            .get(k + 1)
-                            .filter(|n| n.is_motion())
-                            .map_or(amax, |n| amax.min(n.max_acceleration));
                         // Met if it can be reached with zero acceleration,
                         // or if braking at once passes it below the cap
                         // (still slowing down, for a cap beyond it).
@@ -1059,7 +1057,6 @@ impl Executor {
     /// Move `ds` along the queue from the head and take speed `v` and
     /// acceleration `a`.
     fn travel(&mut self, q: View, head: usize, ds: f64, v: f64, a: f64, consumed: &mut usize) {
-        let jmax = q.get(head).map(|s| s.max_jerk).unwrap_or(f64::INFINITY);
         self.s += ds;
         self.v = v;
         self.a = a;
@@ -1091,7 +1088,6 @@ impl Executor {
         // Braking along the curve comes to rest a hair short of a point
         // where it must stop, then creeps; close the last 10 pm at once.
         let snap = 1e-8;
-        let _ = jmax;
         if self.v == 0.0 && self.a == 0.0 {
             let to_zero = self
                 .look_ahead(q, k, self.s, 0.0, 0.0)

@@ -41,7 +41,7 @@ use std::collections::VecDeque;
 
 use kerf_interp::{Canon, CanonCmd, Plane, Position, Source};
 
-use crate::path::{Arc, Shape, Vec9};
+use crate::path::{distance_to_segment, Arc, Shape, Vec9};
 
 /// Most points a chain holds before a new move can no longer join it
 /// (LinuxCNC's limit): one merged line stands for at most this many + 1
@@ -86,22 +86,6 @@ pub struct CollinearMerge {
     source: Option<Source>,
     /// Merged lines waiting to be planned.
     out: VecDeque<Canon>,
-}
-
-/// XYZ distance from `p` to the segment `a`–`b`.
-fn distance(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
-    let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
-    let w: [f64; 3] = std::array::from_fn(|i| p[i] - a[i]);
-    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    let t = if dd > 0.0 {
-        ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (0..3)
-        .map(|i| (w[i] - t * d[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
 }
 
 impl CollinearMerge {
@@ -238,7 +222,7 @@ impl CollinearMerge {
         }
         self.points
             .iter()
-            .all(|p| distance(p, &self.start, end) <= self.tolerance)
+            .all(|p| distance_to_segment(p, &self.start, end) <= self.tolerance)
     }
 
     /// Hand on what is held as one straight feed to the last point.

@@ -11,8 +11,8 @@ use std::collections::VecDeque;
 use kerf_interp::{Canon, CanonCmd, InterpError, Position};
 
 use crate::exec::Executor;
-use crate::kinematics::{Kinematics, MAX_JOINTS};
-use crate::path::{Arc, Shape, Vec9};
+use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
+use crate::path::{distance_to_segment, Arc, Shape, Vec9};
 use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SegmentKind};
 
 /// Why an offline run stopped early.
@@ -54,6 +54,21 @@ pub struct LimitUse {
 }
 
 impl LimitUse {
+    /// Take in one sample's (velocity, acceleration, jerk) by finite
+    /// differences against `limits` (jerk only for jerk-limited plans).
+    fn see(&mut self, d: [Option<f64>; 3], limits: &Limits, jerk: bool, time: f64, line: u32) {
+        if let Some(v) = d[0] {
+            self.velocity.see(v.abs() / limits.max_velocity, time, line);
+        }
+        if let Some(a) = d[1] {
+            self.acceleration
+                .see(a.abs() / limits.max_acceleration, time, line);
+        }
+        if let (Some(j), true) = (d[2], jerk) {
+            self.jerk.see(j.abs() / limits.max_jerk, time, line);
+        }
+    }
+
     /// The largest of velocity, acceleration and jerk use.
     pub fn worst(&self) -> f64 {
         self.velocity
@@ -245,22 +260,6 @@ impl PathWindow {
     }
 }
 
-/// Distance from `p` to the segment a–b in XYZ.
-fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
-    let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
-    let w: [f64; 3] = std::array::from_fn(|i| p[i] - a[i]);
-    let dd: f64 = d.iter().map(|x| x * x).sum();
-    let t = if dd > 0.0 {
-        (w.iter().zip(&d).map(|(x, y)| x * y).sum::<f64>() / dd).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (0..3)
-        .map(|i| (w[i] - t * d[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-}
-
 /// Finite-difference limit tracker for one coordinate.
 #[derive(Clone, Copy, Debug, Default)]
 struct Differences {
@@ -401,20 +400,10 @@ pub fn run(
             }
         }
 
+        let jerk = config.planner.jerk_limited;
         for (k, spec) in axis_specs.iter().enumerate() {
             let d = axis_diff[k].push(p[spec.axis.index()], dt);
-            let l = spec.limits;
-            let u = &mut report.axes[k];
-            if let Some(v) = d[0] {
-                u.velocity.see(v.abs() / l.max_velocity, time, sample.line);
-            }
-            if let Some(a) = d[1] {
-                u.acceleration
-                    .see(a.abs() / l.max_acceleration, time, sample.line);
-            }
-            if let (Some(j), true) = (d[2], config.planner.jerk_limited) {
-                u.jerk.see(j.abs() / l.max_jerk, time, sample.line);
-            }
+            report.axes[k].see(d, &spec.limits, jerk, time, sample.line);
         }
         let mut q = [0.0; MAX_JOINTS];
         kins.inverse(&sample.position, &mut q[..njoints])
@@ -424,18 +413,7 @@ pub fn run(
             })?;
         for (k, spec) in kins.joints().iter().enumerate() {
             let d = joint_diff[k].push(q[k], dt);
-            let l = spec.limits;
-            let u = &mut report.joints[k];
-            if let Some(v) = d[0] {
-                u.velocity.see(v.abs() / l.max_velocity, time, sample.line);
-            }
-            if let Some(a) = d[1] {
-                u.acceleration
-                    .see(a.abs() / l.max_acceleration, time, sample.line);
-            }
-            if let (Some(j), true) = (d[2], config.planner.jerk_limited) {
-                u.jerk.see(j.abs() / l.max_jerk, time, sample.line);
-            }
+            report.joints[k].see(d, &spec.limits, jerk, time, sample.line);
         }
         if config.record > 0 {
             all_points.push(Point {

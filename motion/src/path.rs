@@ -21,6 +21,23 @@ pub fn norm(v: &Vec9) -> f64 {
     v.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
+/// X Y Z distance from `p` to the segment `a`–`b` (the other axes do not
+/// count: path tolerances are in the tool's space).
+pub fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
+    let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
+    let w: [f64; 3] = std::array::from_fn(|i| p[i] - a[i]);
+    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let t = if dd > 0.0 {
+        ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (0..3)
+        .map(|i| (w[i] - t * d[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
 /// A straight line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Line {
@@ -1032,13 +1049,7 @@ mod tests {
     /// by up to 1 % here, and many times over on sharper corners.)
     #[test]
     fn sampled_curvature_rate_bounds_the_exact_one() {
-        let mut seed: u64 = 0x2545_f491_4f6c_dd1d;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testkit::uniform(0x2545_f491_4f6c_dd1d);
         let unit = |rnd: &mut dyn FnMut() -> f64| loop {
             let d = v(2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0, 2.0 * rnd() - 1.0);
             let n = norm(&d);

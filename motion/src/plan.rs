@@ -1570,13 +1570,7 @@ mod tests {
         // Corners of every sharpness, unequal legs and end curvatures: the
         // fast test must never accept a blend the sampled test rejects, and
         // should accept the comfortable ones.
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rand = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rand = crate::testkit::uniform(0x2545_f491_4f6c_dd1d);
         let xyz = |x: f64, y: f64, z: f64| [x, y, z, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
         let (mut fast, mut sampled) = (0, 0);
         for _ in 0..50_000 {

@@ -5,6 +5,17 @@ use kerf_interp::{Axis, Position};
 
 use crate::kinematics::{AxisSpec, JointSpec, Kinematics, KinematicsError, Limits};
 
+/// A seeded xorshift generator of uniform numbers in [0, 1), so random
+/// tests repeat.
+pub(crate) fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// X Y Z with each joint equal to its axis and the same limits everywhere.
 pub(crate) struct Xyz {
     axes: Vec<AxisSpec>,
