@@ -160,6 +160,10 @@ fn passes_below(v: f64, a: f64, limit: f64, dist: f64, amax: f64, jmax: f64) -> 
         })
 }
 
+/// Segments from the head whose acceleration limits the jerk search tries
+/// to land on exactly.
+const EDGE_SEGMENTS: usize = 8;
+
 /// Segments this far past the end of a look ahead's reach are searched for
 /// lower limits that would extend it.
 const LOOK_PAST_REACH: usize = 64;
@@ -972,13 +976,28 @@ impl Executor {
                 // it allows. Feasible jerks then lie inside the range, not
                 // at its bottom: look for one, from the top.
                 const GRID: usize = 16;
+                let grid = |k: usize| j_floor + (j_track - j_floor) * k as f64 / GRID as f64;
                 for k in (1..GRID).rev() {
-                    let jk = j_floor + (j_track - j_floor) * k as f64 / GRID as f64;
-                    if ahead_of(jk, self).1.ok {
-                        lo = jk;
-                        hi = j_floor + (j_track - j_floor) * (k + 1) as f64 / GRID as f64;
+                    if ahead_of(grid(k), self).1.ok {
+                        (lo, hi) = (grid(k), grid(k + 1));
                         found = true;
                         break;
+                    }
+                }
+                // The feasible set can shrink to the one jerk that lands
+                // the acceleration exactly on a coming segment's limit (the
+                // edge of braking as hard as that segment allows), which a
+                // grid misses: try those of the segments ahead.
+                for k in head..head + EDGE_SEGMENTS {
+                    let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
+                        break;
+                    };
+                    for edge in [-seg.max_acceleration, seg.max_acceleration] {
+                        let jk = (edge - self.a) / dt;
+                        if jk > lo && jk < j_track && ahead_of(jk, self).1.ok {
+                            (lo, hi) = (jk, jk);
+                            found = true;
+                        }
                     }
                 }
             }
