@@ -670,11 +670,15 @@ impl Executor {
                         let crest = v + a.max(0.0).powi(2) / (2.0 * jn);
                         // Met if it can be reached with zero acceleration,
                         // or if braking at once passes it below the cap
-                        // (still slowing down, for a cap beyond it).
+                        // (still slowing down, for a cap beyond it) a
+                        // period's travel early, at the faster of the speed
+                        // now and the cap: the motion crosses in whole
+                        // periods, and a margin that grew as the motion sped
+                        // up toward the cap failed states it had passed.
                         if limit < crest
                             && braking_distance(v, a, limit, amax, jn) > dist + 1e-9
                             && !excepted(dist, limit)
-                            && !passes_below(v, a, limit, dist - v * self.period, an, jn)
+                            && !passes_below(v, a, limit, dist - v.max(limit) * self.period, an, jn)
                         {
                             fail(Binding {
                                 dist,
