@@ -15,7 +15,7 @@ use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::merge::{CollinearMerge, MergeContext, Verdict};
-use crate::path::{norm, Arc, Blend, BlendExtremes, Line, Poly, Shape, Vec9};
+use crate::path::{corner_spread, norm, Arc, Blend, BlendExtremes, Line, Poly, Shape, Vec9};
 
 /// What a segment does.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -199,13 +199,13 @@ pub struct PlannerConfig {
     /// Jerk-limited (S-curve) profiles, or acceleration-limited
     /// (trapezoidal) ones for comparison.
     pub jerk_limited: bool,
-    /// Share of each axis's acceleration given to the centripetal part on
-    /// curves (0 to 1); the rest is left for speeding up and slowing down
-    /// along them.
+    /// Most of each axis's acceleration the centripetal part may take on
+    /// curves (0 to 1), which sets their speed limit; what is left at that
+    /// speed is for speeding up and slowing down along them.
     pub centripetal_share: f64,
-    /// Share of each axis's jerk given to the v³·κ′ term on curves (0 to
-    /// 1); the tangential j·t and coupling 3·a·v·κ terms get half the rest
-    /// each.
+    /// Most of each axis's jerk the v³·κ′ term may take on curves (0 to
+    /// 1), likewise; the tangential j·t and coupling 3·a·v·κ terms get half
+    /// of what is left at the speed limit each.
     pub jerk_rate_share: f64,
     /// Path tolerance for G64 without P, mm (LinuxCNC: unlimited).
     pub default_tolerance: f64,
@@ -226,7 +226,7 @@ impl Default for PlannerConfig {
             mode: PathMode::Blend { tolerance: 0.01 },
             jerk_limited: true,
             centripetal_share: 0.5,
-            jerk_rate_share: 1.0 / 3.0,
+            jerk_rate_share: 0.5,
             default_tolerance: 0.01,
             digital_outputs: MAX_DIGITAL_OUTPUTS,
             analog_outputs: MAX_ANALOG_OUTPUTS,
@@ -984,8 +984,9 @@ impl<'k> Planner<'k> {
         if !(STRAIGHT..=SHARPEST).contains(&bend) || !la.xyz_only || !lb.xyz_only {
             return None;
         }
-        // Closed-form leg of a symmetric blend with zero end curvature.
-        let leg = tolerance * 32.0 / (6.0 * bend);
+        // Closed-form leg of a symmetric blend with zero end curvature: its
+        // midpoint is leg·(16 − 10σ)/32·|u1 − u2| from the corner.
+        let leg = tolerance * 32.0 / ((16.0 - 10.0 * corner_spread(bend)) * bend);
         let (a, b) = (leg.min(la.length / 2.0), leg.min(lb.length / 2.0));
         // Unequal legs let dense curves blend midpoint to midpoint though
         // neighbouring chords differ a little; a tolerance bounds how far
@@ -1032,6 +1033,8 @@ impl<'k> Planner<'k> {
         let (la, lb) = (&pa.line, &pb.line);
         let (u1, u2) = (&pa.direction, &pb.direction);
         let corner = la.end;
+        let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
+        let scale = corner_spread(bend) * (legs.0 + legs.1);
         let control = Blend::hermite_control(
             &std::array::from_fn(|i| corner[i] - legs.0 * u1[i]),
             u1,
@@ -1039,12 +1042,11 @@ impl<'k> Planner<'k> {
             &std::array::from_fn(|i| corner[i] + legs.1 * u2[i]),
             u2,
             k1,
-            legs.0 + legs.1,
+            scale,
         );
-        // A well-shaped blend moves at about `scale` per unit parameter
+        // A well-shaped blend moves at least `scale` per unit parameter
         // everywhere; large end curvatures can fold it into a near-cusp,
         // where |B′| all but vanishes and arc length stops being usable.
-        let scale = legs.0 + legs.1;
         let min_speed = 0.3 * scale;
         let proven = hull_bounds(&control, la, lb, tolerance, min_speed);
         (proven.all() || sampled_within(&control, la, lb, tolerance, min_speed, &proven))
@@ -1290,10 +1292,11 @@ impl<'k> Planner<'k> {
     ///
     /// Along a line, axis i moves at t_i times the path motion, so each limit
     /// divides by |t_i|. On a curve, axis acceleration is a·t_i + v²·κ_i and
-    /// axis jerk is j·t_i + 3·a·v·κ_i + v³·κ'_i; the budget is split
-    /// (acceleration by [`PlannerConfig::centripetal_share`], jerk by
-    /// [`PlannerConfig::jerk_rate_share`], by default in thirds), which
-    /// bounds the sum by the limit.
+    /// axis jerk is j·t_i + 3·a·v·κ_i + v³·κ'_i. The speed limit comes
+    /// first, with the centripetal and rate terms taking up to
+    /// [`PlannerConfig::centripetal_share`] and
+    /// [`PlannerConfig::jerk_rate_share`] of each budget; the tangential
+    /// terms get what that speed leaves, which bounds each sum by the limit.
     ///
     /// `extremes` are a blend's ([`Blend::sampled`]) when the caller has them.
     fn path_limits(
@@ -1359,25 +1362,15 @@ impl<'k> Planner<'k> {
             }
         }
         let curved = !matches!(shape, Shape::Line(_));
-        // Roots are monotonic: one root of the least radicand over the axes
-        // gives the least root (cube roots are slow).
+        // The speed limit first: the centripetal and curvature-rate terms
+        // may take up to their shares of each axis's budget. Roots are
+        // monotonic: one root of the least radicand over the axes gives the
+        // least root (cube roots are slow).
         let (mut centripetal, mut rate) = (f64::INFINITY, f64::INFINITY);
         for i in 0..9 {
             let Some(l) = self.limits[i] else { continue };
             if t_max[i] > 0.0 {
                 v = v.min(l.max_velocity / t_max[i]);
-                let share = if curved {
-                    1.0 - self.config.centripetal_share
-                } else {
-                    1.0
-                };
-                a = a.min(share * l.max_acceleration / t_max[i]);
-                let jshare = if curved {
-                    (1.0 - self.config.jerk_rate_share) / 2.0
-                } else {
-                    1.0
-                };
-                j = j.min(jshare * l.max_jerk / t_max[i]);
             }
             if k_max[i] > 0.0 {
                 centripetal =
@@ -1393,12 +1386,33 @@ impl<'k> Planner<'k> {
         if rate.is_finite() {
             v = v.min(rate.cbrt());
         }
-        // The 3·a·v·κ_i jerk term, given the speed limit just found.
+        // Then whatever the speed limit leaves of each budget, at that
+        // speed, is for speeding up and slowing down along the path: the
+        // tangential a·t_i gets the acceleration, and the tangential j·t_i
+        // and the coupling 3·a·v·κ_i half the jerk each. Below the speed
+        // limit the curve takes less, so the sums stay within the limits.
         for i in 0..9 {
             let Some(l) = self.limits[i] else { continue };
+            let (a_left, j_left) = if !curved {
+                (l.max_acceleration, l.max_jerk)
+            } else if v.is_finite() {
+                (
+                    l.max_acceleration - v * v * k_max[i],
+                    (l.max_jerk - v * v * v * dk_max[i]) / 2.0,
+                )
+            } else {
+                (
+                    (1.0 - self.config.centripetal_share) * l.max_acceleration,
+                    (1.0 - self.config.jerk_rate_share) / 2.0 * l.max_jerk,
+                )
+            };
+            let (a_left, j_left) = (a_left.max(0.0), j_left.max(0.0));
+            if t_max[i] > 0.0 {
+                a = a.min(a_left / t_max[i]);
+                j = j.min(j_left / t_max[i]);
+            }
             if k_max[i] > 0.0 && l.max_jerk.is_finite() && v.is_finite() && v > 0.0 {
-                let share = (1.0 - self.config.jerk_rate_share) / 2.0;
-                a = a.min(share * l.max_jerk / (3.0 * v * k_max[i]));
+                a = a.min(j_left / (3.0 * v * k_max[i]));
             }
         }
         if self.sample_joints {
