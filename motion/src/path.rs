@@ -101,6 +101,11 @@ const SPREAD: [(f64, f64); 12] = [
 /// σ of [`SPREAD`] for a corner with |u1 − u2| = `bend`: the planner's
 /// corner blends have end derivatives σ·(sum of legs) long.
 pub fn corner_spread(bend: f64) -> f64 {
+    // Up to the first angle in the table (|u1 − u2| = 2·sin(θ/2) ≤ 1 up to
+    // 60°, the dense curves) no arcsine is needed.
+    if bend <= 1.0 {
+        return SPREAD[0].1;
+    }
     let degrees = 2.0 * (bend / 2.0).clamp(0.0, 1.0).asin().to_degrees();
     let k = SPREAD.partition_point(|&(angle, _)| angle <= degrees);
     match k {
