@@ -236,7 +236,9 @@ fn next_status(client: &mut Client) -> Status {
 }
 
 /// Status events until `pred` holds; returns every status seen, the last
-/// one satisfying `pred`.
+/// one satisfying `pred`. Fails, showing the last status, if `pred` still
+/// does not hold after [`MAX_STATUSES`]: a machine that never gets there
+/// is a failure to read, not a test that runs forever.
 fn statuses_until(client: &mut Client, pred: impl Fn(&Status) -> bool) -> Vec<Status> {
     let mut seen = Vec::new();
     loop {
@@ -246,8 +248,18 @@ fn statuses_until(client: &mut Client, pred: impl Fn(&Status) -> bool) -> Vec<St
         if done {
             return seen;
         }
+        assert!(
+            seen.len() < MAX_STATUSES,
+            "no status satisfied the condition in {MAX_STATUSES} events; the last: {:?}",
+            seen.last()
+        );
     }
 }
+
+/// Status events a test waits through at most: 5 minutes at 200 Hz, the
+/// fastest rate these tests subscribe at (the slow 1 Hz watcher only waits
+/// for the machine's next state change).
+const MAX_STATUSES: usize = 60_000;
 
 fn code_of(e: ClientError) -> (ErrorCode, String) {
     match e {
