@@ -358,10 +358,9 @@ impl<'k> TimeBound<'k> {
             if tc == 0.0 {
                 continue;
             }
-            let a = coord.limits().1;
-            let (p, q) = ((a - x * kc) / tc, (-a - x * kc) / tc);
-            lo = lo.max(p.min(q));
-            hi = hi.min(p.max(q));
+            let (l, h) = accel_interval(coord.limits().1, tc, kc, x);
+            lo = lo.max(l);
+            hi = hi.min(h);
         }
         (lo, hi)
     }
@@ -437,11 +436,8 @@ impl<'k> TimeBound<'k> {
                 continue;
             }
             let a = coord.limits().1;
-            let end = |x: f64| {
-                let (p, q) = ((a - x * kc) / tc, (-a - x * kc) / tc);
-                (p.min(q), p.max(q))
-            };
-            let ((l0, h0), (l1, h1)) = (end(0.0), end(xa));
+            let (l0, h0) = accel_interval(a, tc, kc, 0.0);
+            let (l1, h1) = accel_interval(a, tc, kc, xa);
             hb = hb.min(h0.max(h1));
             lb = lb.max(l0.min(l1));
         }
@@ -706,6 +702,13 @@ fn line_time(v0: f64, v1: f64, xmax: f64, a: f64, len: f64) -> f64 {
         let cruise = len - (xmax - x0) / (2.0 * a) - (xmax - x1) / (2.0 * a);
         (2.0 * vm - v0 - v1) / a + cruise.max(0.0) / vm
     }
+}
+
+/// The u = dv/dt for which a coordinate with tangent `tc` (non-zero) and
+/// curvature `kc` keeps |u·tc + x·kc| within its acceleration limit `a`.
+fn accel_interval(a: f64, tc: f64, kc: f64, x: f64) -> (f64, f64) {
+    let (p, q) = ((a - x * kc) / tc, (-a - x * kc) / tc);
+    (p.min(q), p.max(q))
 }
 
 /// The bound for a list of planned segments (markers included) on `kins`.

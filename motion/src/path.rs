@@ -106,16 +106,14 @@ pub fn corner_spread(bend: f64) -> f64 {
     if bend <= 1.0 {
         return SPREAD[0].1;
     }
-    let degrees = 2.0 * (bend / 2.0).clamp(0.0, 1.0).asin().to_degrees();
+    let degrees = 2.0 * (bend / 2.0).min(1.0).asin().to_degrees();
+    // Past 60°, so at least one entry is at or below `degrees`.
     let k = SPREAD.partition_point(|&(angle, _)| angle <= degrees);
-    match k {
-        0 => SPREAD[0].1,
-        k if k == SPREAD.len() => SPREAD[k - 1].1,
-        k => {
-            let ((a0, s0), (a1, s1)) = (SPREAD[k - 1], SPREAD[k]);
-            s0 + (s1 - s0) * (degrees - a0) / (a1 - a0)
-        }
+    if k == SPREAD.len() {
+        return SPREAD[k - 1].1;
     }
+    let ((a0, s0), (a1, s1)) = (SPREAD[k - 1], SPREAD[k]);
+    s0 + (s1 - s0) * (degrees - a0) / (a1 - a0)
 }
 
 /// A G2-continuous corner blend: a quintic Bézier whose first three and

@@ -985,8 +985,8 @@ impl<'k> Planner<'k> {
             return None;
         }
         // Closed-form leg of a symmetric blend with zero end curvature: its
-        // midpoint is leg·(16 − 10σ)/32·|u1 − u2| from the corner.
-        let leg = tolerance * 32.0 / ((16.0 - 10.0 * corner_spread(bend)) * bend);
+        // deviation is proportional to the leg.
+        let leg = tolerance / Blend::deviation(1.0, u1, u2);
         let (a, b) = (leg.min(la.length / 2.0), leg.min(lb.length / 2.0));
         // Unequal legs let dense curves blend midpoint to midpoint though
         // neighbouring chords differ a little; a tolerance bounds how far
@@ -1044,7 +1044,7 @@ impl<'k> Planner<'k> {
             k1,
             scale,
         );
-        // A well-shaped blend moves at least `scale` per unit parameter
+        // A well-shaped blend moves at about `scale` per unit parameter
         // everywhere; large end curvatures can fold it into a near-cusp,
         // where |B′| all but vanishes and arc length stops being usable.
         let min_speed = 0.3 * scale;
