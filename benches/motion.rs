@@ -9,10 +9,12 @@
 //! helices and corner blends), by forward and backward passes on a 0.01 mm
 //! discretisation, under the same feed, the same axis and joint velocity
 //! and acceleration limits and the same stops, and of the axes' jerk
-//! limits only what the path's bending forces whatever the tangential jerk:
-//! on curves |3·(κ·n)·v·a + (κ′·n)·v³| ≤ Σ J_i·|n_i| (n the unit normal),
-//! at curvature jumps v²·|Δκ_i| ≤ 4·J_i·T (what a 1 ms sampled trajectory
-//! within J_i allows; the planner uses J_i·T). Every trajectory along that
+//! limits necessary conditions: on curves |3·(κ·n)·v·a + (κ′·n)·v³| ≤
+//! Σ J_i·|n_i| (n the unit normal), at curvature jumps v²·|Δκ_i| ≤
+//! 4·J_i·T (what a 1 ms sampled trajectory within J_i allows; the planner
+//! uses J_i·T), and along the tangent |a| ≤ √(2·Ĵ·v) with Ĵ bounding the
+//! path's third derivative (the S-curve's slow start from rest and slow
+//! finish into it). Every trajectory along that
 //! path within the machine's limits meets these necessary conditions, so
 //! none is quicker: it is a lower bound. "Independent" means independent
 //! of the executor's online velocity profile, which is what the ratio
@@ -264,7 +266,7 @@ fn main() {
         throughput("spiral 0.02 mm, 1M seg", &spiral(1_000_000), kins);
     }
     println!();
-    println!("Time-optimality: planned / bound (TOPP of the planned path, normal jerk only);");
+    println!("Time-optimality: planned / bound (TOPP of the planned path, jerk as necessary conditions);");
     println!("deviation from the programmed path; largest use of the axis and joint");
     println!("velocity, acceleration and jerk limits (must stay <= 1 + 1e-6)");
     println!(

@@ -57,10 +57,34 @@
 //! form: with U bounding the |u| that could offset p‴·n·v³ anywhere in the
 //! acceleration-feasible range of x, |p‴·n|·v³ ≤ J_n + 3·(κ·n)·U·v (a
 //! cubic with one positive root, found by Newton from above). Lines have
-//! no normal and no jerk condition; the tangential jerk (with s⃛) is not
-//! bounded at all; joints of non-trivial kinematics get none (they would
-//! only add conditions). `BoundConfig::jerk = false` drops all of this,
-//! for a planner run with `jerk_limited: false`.
+//! no normal and no such condition.
+//!
+//! Tangential jerk: speeding up from rest and slowing down to it. On the
+//! tangent, s⃛ itself is bounded: on a line each axis's jerk is t_i·s⃛, so
+//! |s⃛| ≤ min_i J_i/|t_i|; on a curve, projecting the axis jerk on t
+//! (with t·t = 1, κ·t = 0 and p‴·t = −|κ|² on an arc-length parameter;
+//! the general terms are kept for arcs) gives s⃛ = j·t + |κ|²·v³, so
+//! |s⃛| ≤ Σ_i J_i·|t_i| + |κ|²·v³ =: Ĵ, with v from the first round of
+//! passes (which already bounds every trajectory's speed). A trajectory
+//! with u > 0 at some instant built that u up from below at a rate of at
+//! most Ĵ, so over the last u/Ĵ seconds u stayed positive and the speed
+//! rose by at least u²/(2Ĵ) from a speed ≥ 0:
+//!
+//! * u ≤ √(2·Ĵ·v), and likewise −u ≤ √(2·Ĵ·v) looking ahead (u < 0 must
+//!   return to 0 before the speed reaches 0),
+//!
+//! with Ĵ the largest over the stretch of path those u/Ĵ seconds can cover
+//! (at most v·U/Ĵ long, U bounding |u|; a node at rest ends it). This is
+//! the S-curve's slow start, which a second-order bound lacks: from rest,
+//! v^{3/2} grows by 1.5·√(2Ĵ)·ds while √(2Ĵ·v) < the acceleration bound.
+//! A second round of passes applies it, and lines take their time from
+//! the same two ramps in closed form. It is a relaxation, not the S-curve:
+//! it lets u switch from +√(2Ĵv) to −√(2Ĵv) at once, so on a short line
+//! from rest to rest it is 2·(3L/J)^{1/3} against the S-curve's
+//! 4·(L/2J)^{1/3}, 9 % less. Joints of non-trivial kinematics get none of
+//! the jerk conditions (they would only add conditions).
+//! `BoundConfig::jerk = false` drops all of this, for a planner run with
+//! `jerk_limited: false`.
 //!
 //! What "within its limits" means here: at every instant, as the planner's
 //! per-segment limits guarantee for the executor (its path limits keep
@@ -174,6 +198,28 @@ struct Jerk {
     jn: f64,
 }
 
+/// What bounds the path's third derivative s⃛ from above at a node, as
+/// s⃛ ≤ `base` + `coupling`·v·U + `bend`·v³ (U bounding |dv/dt|): on
+/// lines the axes' jerk limits over the tangent, on curves the projection
+/// of the axis jerk on the tangent (see the module documentation).
+#[derive(Clone, Copy, Debug)]
+struct Tangential {
+    /// mm/s³; infinite where nothing bounds s⃛ (no jerk limits).
+    base: f64,
+    /// 3·|κ·t|/|t|², 1/mm.
+    coupling: f64,
+    /// max(0, −p‴·t)/|t|², 1/mm² (|κ|² on an arc-length parameter).
+    bend: f64,
+}
+
+impl Tangential {
+    const FREE: Tangential = Tangential {
+        base: f64::INFINITY,
+        coupling: 0.0,
+        bend: 0.0,
+    };
+}
+
 /// A sampled point of the path.
 #[derive(Clone, Copy, Debug)]
 struct Node {
@@ -196,6 +242,9 @@ pub struct Profile {
     pub s: Vec<f64>,
     /// Optimal path speed at each node, mm/s.
     pub v: Vec<f64>,
+    /// Time at which the optimal profile reaches each node, s, with every
+    /// dwell counted at the start.
+    pub t: Vec<f64>,
 }
 
 /// Collects planned segments and computes the time-optimal profile along
@@ -210,6 +259,8 @@ pub struct TimeBound<'k> {
     geometry: Vec<f64>,
     /// Per node, the normal jerk constraint.
     jerks: Vec<Jerk>,
+    /// Per node, what bounds s⃛ from above.
+    tangential: Vec<Tangential>,
     /// Jerk limit of each axis (joints moving with it folded in), infinite
     /// for axes the machine lacks or when jerk is not limited.
     axis_jerk: [f64; 9],
@@ -263,6 +314,7 @@ impl<'k> TimeBound<'k> {
             nodes: Vec::new(),
             geometry: Vec::new(),
             jerks: Vec::new(),
+            tangential: Vec::new(),
             axis_jerk,
             rest: true,
             dwell: 0.0,
@@ -473,7 +525,47 @@ impl<'k> TimeBound<'k> {
         xa.min(y * y)
     }
 
-    fn push_node(&mut self, frame: &Frame, jerk: Jerk, feed: f64, ds: f64, line: bool) {
+    /// What bounds s⃛ from above at `frame`, given p‴·t by `third_t`.
+    fn tangential_at(&self, frame: &Frame, third_t: f64) -> Tangential {
+        if !self.config.jerk {
+            return Tangential::FREE;
+        }
+        let (t, k) = (&frame.tangent, &frame.curvature);
+        let tt: f64 = t.iter().map(|x| x * x).sum();
+        if tt == 0.0 || !tt.is_finite() {
+            return Tangential::FREE;
+        }
+        let moving = (0..9).filter(|&i| t[i] != 0.0);
+        let base = if third_t == 0.0 && k.iter().all(|&c| c == 0.0) {
+            // Straight: axis i's jerk is t_i·s⃛ alone.
+            moving
+                .map(|i| self.axis_jerk[i] / t[i].abs())
+                .fold(f64::INFINITY, f64::min)
+        } else {
+            moving.map(|i| self.axis_jerk[i] * t[i].abs()).sum::<f64>() / tt
+        };
+        let kt: f64 = (0..9).map(|i| k[i] * t[i]).sum();
+        if !base.is_finite() || !kt.is_finite() || !third_t.is_finite() {
+            return Tangential::FREE;
+        }
+        Tangential {
+            base,
+            coupling: 3.0 * kt.abs() / tt,
+            bend: (-third_t).max(0.0) / tt,
+        }
+    }
+
+    fn push_node(
+        &mut self,
+        frame: &Frame,
+        jerk: Jerk,
+        third_t: f64,
+        feed: f64,
+        ds: f64,
+        line: bool,
+    ) {
+        let tangential = self.tangential_at(frame, third_t);
+        self.tangential.push(tangential);
         let start = self.geometry.len();
         let mut g = std::mem::take(&mut self.geometry);
         self.coordinates(frame, &mut g);
@@ -561,7 +653,9 @@ impl<'k> TimeBound<'k> {
                         |_| b.curvature_rate_at_parameter(u),
                         Some(b.third_normal_where_straight(u)),
                     );
-                    self.push_node(&frame, jerk, feed, s1 - s0, false);
+                    // p‴·t = −|κ|² on an arc-length parameter (t·t = 1).
+                    let bend: f64 = frame.curvature.iter().map(|c| c * c).sum();
+                    self.push_node(&frame, jerk, -bend, feed, s1 - s0, false);
                     s0 = s1;
                 }
             }
@@ -570,18 +664,16 @@ impl<'k> TimeBound<'k> {
                 for k in 0..=n {
                     let s = segment.length * k as f64 / n as f64;
                     let frame = if k == 0 { first } else { shape.frame(s) };
-                    let jerk = match shape {
-                        Shape::Arc(a) => self.jerk_at(
-                            &frame,
-                            |n| {
-                                let p3 = arc_third(a, s, segment.length);
-                                (0..9).map(|i| p3[i] * n[i]).sum()
-                            },
-                            None,
-                        ),
-                        _ => Jerk::default(),
+                    let (jerk, third_t) = match shape {
+                        Shape::Arc(a) => {
+                            let p3 = arc_third(a, s, segment.length);
+                            let on = |n: &Vec9| (0..9).map(|i| p3[i] * n[i]).sum::<f64>();
+                            (self.jerk_at(&frame, on, None), on(&frame.tangent))
+                        }
+                        _ => (Jerk::default(), 0.0),
                     };
-                    self.push_node(&frame, jerk, feed, if k < n { step } else { 0.0 }, line);
+                    let ds = if k < n { step } else { 0.0 };
+                    self.push_node(&frame, jerk, third_t, feed, ds, line);
                 }
             }
         }
@@ -610,14 +702,70 @@ impl<'k> TimeBound<'k> {
                 ..Profile::default()
             };
         }
-        let m = self.coords.len();
-        let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
-        let jk = |k: usize| &self.jerks[k];
         let mut x: Vec<f64> = nodes.iter().map(|nd| nd.xmax).collect();
         x[0] = 0.0;
         x[n - 1] = 0.0;
-        // Forward: as hard as the interval allows, dx/ds = 2·hi(s, x),
-        // integrated by Heun's method (second order in ds).
+        let free = vec![f64::INFINITY; n];
+        self.passes(&mut x, &free, &free);
+        // The tangential jerk condition needs an upper bound on the speed
+        // (its curves' terms grow with v), which the first round gives.
+        let (behind, ahead) = if self.config.jerk {
+            let (behind, ahead) = self.ramp_rates(&x);
+            self.passes(&mut x, &behind, &ahead);
+            (behind, ahead)
+        } else {
+            (free.clone(), free)
+        };
+        let m = self.coords.len();
+        let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
+        let v: Vec<f64> = x.iter().map(|x| x.max(0.0).sqrt()).collect();
+        // Time of each step from node k to k + 1.
+        let mut step = vec![0.0; n];
+        for k in 0..n - 1 {
+            let ds = nodes[k].ds;
+            if ds == 0.0 {
+                continue;
+            }
+            step[k] = if nodes[k].line {
+                let (_, a) = self.accel_range(g(k), 0.0);
+                let up = Ramp::new(a, behind[k].max(behind[k + 1]));
+                let down = Ramp::new(a, ahead[k].max(ahead[k + 1]));
+                line_time(v[k], v[k + 1], nodes[k].own, up, down, ds)
+            } else if v[k] + v[k + 1] > 0.0 {
+                // The chord; but from rest (v ∝ s^{2/3} on the ramp) no
+                // less than the ramps' own time over the step.
+                let up = ramp_time(v[k], behind[k].max(behind[k + 1]), ds);
+                let down = ramp_time(v[k + 1], ahead[k].max(ahead[k + 1]), ds);
+                (2.0 * ds / (v[k] + v[k + 1])).max(up).max(down)
+            } else {
+                f64::INFINITY
+            };
+        }
+        let mut time = self.dwell;
+        let mut s = Vec::with_capacity(n);
+        let mut t = Vec::with_capacity(n);
+        let mut at = 0.0;
+        for k in 0..n {
+            s.push(at);
+            t.push(time);
+            at += nodes[k].ds;
+            time += step[k];
+        }
+        Profile { time, s, v, t }
+    }
+
+    /// One forward and one backward pass over `x` (lowering it only):
+    /// as hard as the acceleration interval allows, dx/ds = 2·hi(s, x),
+    /// integrated by Heun's method (second order in ds), and no faster
+    /// than u ≤ C·v^½ with C = `behind[k]` lets it (see
+    /// [`ramp_rates`](Self::ramp_rates)); then the same slowing down from
+    /// the end with `ahead`.
+    fn passes(&self, x: &mut [f64], behind: &[f64], ahead: &[f64]) {
+        let nodes = &self.nodes;
+        let n = nodes.len();
+        let m = self.coords.len();
+        let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
+        let jk = |k: usize| &self.jerks[k];
         for k in 0..n - 1 {
             let ds = nodes[k].ds;
             if ds == 0.0 {
@@ -627,10 +775,9 @@ impl<'k> TimeBound<'k> {
             let (_, hi0) = self.u_range(g(k), jk(k), x[k]);
             let guess = (x[k] + 2.0 * ds * hi0).clamp(0.0, x[k + 1]);
             let (_, hi1) = self.u_range(g(k + 1), jk(k + 1), guess);
-            x[k + 1] = x[k + 1].min((x[k] + ds * (hi0 + hi1)).max(0.0));
+            let ramp = ramp_rise(x[k], behind[k].max(behind[k + 1]), ds);
+            x[k + 1] = x[k + 1].min((x[k] + ds * (hi0 + hi1)).max(0.0)).min(ramp);
         }
-        // Backward: as hard as the interval allows slowing down, the same
-        // way from the end.
         for k in (0..n - 1).rev() {
             let ds = nodes[k].ds;
             if ds == 0.0 {
@@ -640,29 +787,71 @@ impl<'k> TimeBound<'k> {
             let (lo1, _) = self.u_range(g(k + 1), jk(k + 1), x[k + 1]);
             let guess = (x[k + 1] - 2.0 * ds * lo1).clamp(0.0, x[k]);
             let (lo0, _) = self.u_range(g(k), jk(k), guess);
-            x[k] = x[k].min((x[k + 1] - ds * (lo0 + lo1)).max(0.0));
+            let ramp = ramp_rise(x[k + 1], ahead[k].max(ahead[k + 1]), ds);
+            x[k] = x[k].min((x[k + 1] - ds * (lo0 + lo1)).max(0.0)).min(ramp);
         }
-        let v: Vec<f64> = x.iter().map(|x| x.max(0.0).sqrt()).collect();
-        let mut time = self.dwell;
-        let mut s = Vec::with_capacity(n);
-        let mut at = 0.0;
+    }
+
+    /// Per node, the rates C (mm^½/s^{5/2}) of the tangential jerk
+    /// condition |u| ≤ C·v^½, given `x` bounding v² from above: C =
+    /// √(2·Ĵ) with Ĵ the largest bound on s⃛ over the stretch of path a
+    /// trajectory covers while its acceleration builds up (`behind`, for
+    /// u > 0) or dies away (`ahead`, u < 0). See the module documentation.
+    fn ramp_rates(&self, x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let nodes = &self.nodes;
+        let n = nodes.len();
+        let m = self.coords.len();
+        let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
+        let mut at = Vec::with_capacity(n);
+        let mut reach = Vec::with_capacity(n);
+        let mut own = Vec::with_capacity(n);
+        let mut pos = 0.0;
         for k in 0..n {
-            s.push(at);
-            if k + 1 == n || nodes[k].ds == 0.0 {
-                continue;
-            }
-            let ds = nodes[k].ds;
-            at += ds;
-            time += if nodes[k].line {
-                let (_, a) = self.accel_range(g(k), 0.0);
-                line_time(v[k], v[k + 1], nodes[k].own, a, ds)
-            } else if v[k] + v[k + 1] > 0.0 {
-                2.0 * ds / (v[k] + v[k + 1])
-            } else {
-                f64::INFINITY
-            };
+            at.push(pos);
+            pos += nodes[k].ds;
+            let v = x[k].max(0.0).sqrt();
+            let u = self.u_bound(g(k), x[k]);
+            let t = &self.tangential[k];
+            let j = t.base + t.coupling * v * u + t.bend * v * v * v;
+            own.push(if j.is_finite() { j } else { f64::INFINITY });
+            reach.push(v * u);
         }
-        Profile { time, s, v }
+        // The window: u builds up from 0 (behind) or falls back to 0
+        // (ahead) at |s⃛| ≤ Ĵ in |u|/Ĵ ≤ U/Ĵ seconds at speeds no more than
+        // v, so over at most v·U/Ĵ of path; widen it until the largest Ĵ
+        // in it says it is wide enough. A node at rest ends it (the
+        // trajectory stands there).
+        let window = |k: usize, step: &dyn Fn(usize) -> Option<usize>| {
+            let mut j = own[k];
+            let mut i = k;
+            while j.is_finite() && x[i] > 0.0 {
+                let Some(next) = step(i) else { break };
+                if (at[next] - at[k]).abs() > reach[k] / j {
+                    break;
+                }
+                i = next;
+                j = j.max(own[i]);
+            }
+            (2.0 * j).sqrt()
+        };
+        let behind = (0..n).map(|k| window(k, &|i| i.checked_sub(1))).collect();
+        let ahead = (0..n)
+            .map(|k| window(k, &|i| (i + 1 < n).then_some(i + 1)))
+            .collect();
+        (behind, ahead)
+    }
+
+    /// A bound on |u| = |dv/dt| at x = v²: each coordinate's acceleration
+    /// |u·t_c + x·κ_c| ≤ A_c.
+    fn u_bound(&self, g: &[f64], x: f64) -> f64 {
+        let mut u = f64::INFINITY;
+        for (c, coord) in self.coords.iter().enumerate() {
+            let (tc, kc) = (g[2 * c], g[2 * c + 1]);
+            if tc != 0.0 {
+                u = u.min((coord.limits().1 + x * kc.abs()) / tc.abs());
+            }
+        }
+        u
     }
 }
 
@@ -685,23 +874,101 @@ fn arc_third(a: &Arc, s: f64, len: f64) -> Vec9 {
     p3
 }
 
-/// Time along a line of length `len` from speed `v0` to `v1` with path
-/// acceleration at most `a` and speed at most sqrt(`xmax`): accelerate,
-/// cruise if there is room, decelerate.
-fn line_time(v0: f64, v1: f64, xmax: f64, a: f64, len: f64) -> f64 {
-    if !a.is_finite() {
+/// How fast the path speed can change from rest or toward it: |u| ≤ `a`
+/// and |u| ≤ `c`·v^½ (the tangential jerk condition).
+#[derive(Clone, Copy, Debug)]
+struct Ramp {
+    a: f64,
+    c: f64,
+    /// The speed where the two meet, (a/c)².
+    knee: f64,
+}
+
+impl Ramp {
+    fn new(a: f64, c: f64) -> Ramp {
+        let knee = if c.is_finite() { (a / c).powi(2) } else { 0.0 };
+        Ramp { a, c, knee }
+    }
+
+    /// Path length to change speed from `v0` to `v` ≥ `v0` as fast as
+    /// allowed.
+    fn length(&self, v0: f64, v: f64) -> f64 {
+        let mut len = 0.0;
+        if v0 < self.knee {
+            let top = v.min(self.knee);
+            len += 2.0 / (3.0 * self.c) * (top.powf(1.5) - v0.powf(1.5));
+        }
+        let from = v0.max(self.knee);
+        if v > from {
+            len += (v * v - from * from) / (2.0 * self.a);
+        }
+        len
+    }
+
+    /// Time to change speed from `v0` to `v` ≥ `v0` as fast as allowed.
+    fn time(&self, v0: f64, v: f64) -> f64 {
+        let mut t = 0.0;
+        if v0 < self.knee {
+            let top = v.min(self.knee);
+            t += 2.0 / self.c * (top.sqrt() - v0.sqrt());
+        }
+        let from = v0.max(self.knee);
+        if v > from {
+            t += (v - from) / self.a;
+        }
+        t
+    }
+}
+
+/// x = v² after `ds` of speeding up from x0 as fast as u ≤ c·v^½ lets
+/// it: v^{3/2} grows by 1.5·c·ds.
+fn ramp_rise(x0: f64, c: f64, ds: f64) -> f64 {
+    if !c.is_finite() {
+        return f64::INFINITY;
+    }
+    (x0.max(0.0).powf(0.75) + 1.5 * c * ds).powf(4.0 / 3.0)
+}
+
+/// Time to cover `ds` speeding up from `v0` as fast as u ≤ c·v^½ lets it,
+/// (2/c)·(√v(ds) − √v0): every trajectory under that condition takes at
+/// least this long.
+fn ramp_time(v0: f64, c: f64, ds: f64) -> f64 {
+    if !c.is_finite() {
+        return 0.0;
+    }
+    let end = ramp_rise(v0 * v0, c, ds).sqrt();
+    2.0 / c * (end.sqrt() - v0.sqrt())
+}
+
+/// Time along a line of length `len` from speed `v0` to `v1`, speeding up
+/// as `up` allows, slowing down as `down` allows, at most sqrt(`xmax`):
+/// speed up, cruise if there is room, slow down.
+fn line_time(v0: f64, v1: f64, xmax: f64, up: Ramp, down: Ramp, len: f64) -> f64 {
+    if !up.a.is_finite() {
         return len / xmax.sqrt();
     }
-    let (x0, x1) = (v0 * v0, v1 * v1);
-    let peak = (x0 + x1) / 2.0 + a * len;
-    if peak <= xmax {
-        let vp = peak.sqrt();
-        (2.0 * vp - v0 - v1) / a
-    } else {
-        let vm = xmax.sqrt();
-        let cruise = len - (xmax - x0) / (2.0 * a) - (xmax - x1) / (2.0 * a);
-        (2.0 * vm - v0 - v1) / a + cruise.max(0.0) / vm
+    let vm = xmax.sqrt();
+    let (v0, v1) = (v0.min(vm), v1.min(vm));
+    let span = |v: f64| up.length(v0, v) + down.length(v1, v);
+    let time = |v: f64| up.time(v0, v) + down.time(v1, v);
+    let cruise = len - span(vm);
+    if cruise >= 0.0 {
+        return time(vm) + cruise / vm;
     }
+    // The peak speed: where the two ramps meet (span grows with v).
+    let (mut lo, mut hi) = (v0.max(v1), vm);
+    if span(lo) >= len {
+        return time(lo);
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if span(mid) < len {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    time(lo)
 }
 
 /// The u = dv/dt for which a coordinate with tangent `tc` (non-zero) and
