@@ -48,6 +48,16 @@ fn no_jerk() -> BoundConfig {
     }
 }
 
+/// The bound's speeds at the nodes strictly between path positions `from`
+/// and `to`, mm.
+fn speeds_between(p: &Profile, from: f64, to: f64) -> Vec<f64> {
+    p.s.iter()
+        .zip(&p.v)
+        .filter(|(s, _)| **s > from && **s < to)
+        .map(|(_, v)| *v)
+        .collect()
+}
+
 /// Rest-to-rest time over `len` with speed cap `v` and acceleration `a`.
 fn trapezoid(len: f64, v: f64, a: f64) -> f64 {
     if v * v / a >= len {
@@ -218,12 +228,7 @@ fn a_circle_above_its_cornering_speed_runs_at_sqrt_a_r() {
         // between, the two axes share it and the optimum runs faster. The
         // slowest point is sqrt(A_eff·R), A_eff the weaker axis of the plane.
         // Middle two turns, away from the start and end ramps.
-        let mid: Vec<f64> =
-            p.s.iter()
-                .zip(&p.v)
-                .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
-                .map(|(_, v)| *v)
-                .collect();
+        let mid = speeds_between(&p, len / 4.0, 3.0 * len / 4.0);
         let lo = mid.iter().copied().fold(f64::INFINITY, f64::min);
         let hi = mid.iter().copied().fold(0.0, f64::max);
         let want = (a_eff * r).sqrt();
@@ -308,12 +313,9 @@ fn joints_of_non_trivial_kinematics_limit_the_bound() {
         Position::xyz(15.0, 10.0, -10.0),
     );
     let len = 4.0 * 2.0 * std::f64::consts::PI * 5.0;
-    let lo =
-        p.s.iter()
-            .zip(&p.v)
-            .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
-            .map(|(_, v)| *v)
-            .fold(f64::INFINITY, f64::min);
+    let lo = speeds_between(&p, len / 4.0, 3.0 * len / 4.0)
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
     let want = (2000.0 * 5.0 / root2).sqrt();
     assert!((lo / want - 1.0).abs() < 0.005, "{lo} vs {want}");
 }
@@ -332,10 +334,8 @@ fn the_jerk_constraint_leaves_a_circles_cruise_speed_alone() {
     let without = bound_with(text, kins, start, no_jerk());
     let len = 4.0 * 2.0 * std::f64::consts::PI * 5.0;
     let lowest = |p: &Profile| {
-        p.s.iter()
-            .zip(&p.v)
-            .filter(|(s, _)| **s > len / 4.0 && **s < 3.0 * len / 4.0)
-            .map(|(_, v)| *v)
+        speeds_between(p, len / 4.0, 3.0 * len / 4.0)
+            .into_iter()
             .fold(f64::INFINITY, f64::min)
     };
     let (a, b) = (lowest(&with), lowest(&without));
@@ -428,10 +428,8 @@ fn a_curvature_jump_caps_the_junction_at_four_times_the_planners_jerk_budget() {
     let start = Position::xyz(10.0, 10.0, -10.0);
     let text = "G1 X20 F6000\nG3 X25 Y15 I0 J5\nM2\n";
     let speed_at_junction = |p: &Profile| {
-        p.s.iter()
-            .zip(&p.v)
-            .filter(|(s, _)| (**s - 10.0).abs() < 1e-9)
-            .map(|(_, v)| *v)
+        speeds_between(p, 10.0 - 1e-9, 10.0 + 1e-9)
+            .into_iter()
             .fold(0.0, f64::max)
     };
     let want = (4.0 * 75_000.0 * 0.001 * 5.0f64).sqrt();

@@ -937,7 +937,7 @@ fn ramp_time(v0: f64, c: f64, ds: f64) -> f64 {
         return 0.0;
     }
     let end = ramp_rise(v0 * v0, c, ds).sqrt();
-    2.0 / c * (end.sqrt() - v0.sqrt())
+    Ramp::new(f64::INFINITY, c).time(v0, end)
 }
 
 /// Time along a line of length `len` from speed `v0` to `v1`, speeding up
