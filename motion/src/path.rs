@@ -237,6 +237,73 @@ impl Arc {
         let in_plane = (self.radius + self.end_radius) / 2.0 * self.sweep.abs();
         (in_plane * in_plane + xyz_axial).sqrt()
     }
+
+    /// Point at fraction `f` (0 to 1) of the sweep, where angle, radius
+    /// and the linear axes all move in proportion: the ends exactly as
+    /// programmed.
+    pub fn point_at_fraction(&self, f: f64) -> Vec9 {
+        if f <= 0.0 {
+            return self.start;
+        }
+        if f >= 1.0 {
+            return self.end;
+        }
+        let theta = self.start_angle + self.sweep * f;
+        let r = self.radius + (self.end_radius - self.radius) * f;
+        let axial = self.axial_delta();
+        let mut p: Vec9 = std::array::from_fn(|i| self.start[i] + axial[i] * f);
+        p[self.plane.0] = self.center.0 + r * theta.cos();
+        p[self.plane.1] = self.center.1 + r * theta.sin();
+        p
+    }
+
+    /// The stretch of this arc from fraction `f0` to `f1` of its sweep
+    /// (0 ≤ f0 ≤ f1 ≤ 1): the same circle, spiral or helix, so its points
+    /// at any fraction are this arc's at the matching fraction.
+    pub fn part(&self, f0: f64, f1: f64) -> Arc {
+        Arc {
+            plane: self.plane,
+            center: self.center,
+            radius: self.radius + (self.end_radius - self.radius) * f0,
+            end_radius: self.radius + (self.end_radius - self.radius) * f1,
+            start_angle: self.start_angle + self.sweep * f0,
+            sweep: self.sweep * (f1 - f0),
+            start: self.point_at_fraction(f0),
+            end: self.point_at_fraction(f1),
+        }
+    }
+
+    /// Chords of the stretch from fraction `f0` to `f1`, as lines, and how
+    /// far any point of a chord can be from the arc, mm: at most `sag`,
+    /// with no more than `most` chords (then the bound is what they give).
+    ///
+    /// Interpolating p(f) linearly over Δf strays at most Δf²/8·max|p″|,
+    /// and with radius and angle linear in f (the linear axes add nothing)
+    /// |p″| ≤ 2·|dr/df|·|dθ/df| + r_max·(dθ/df)².
+    pub fn chords(&self, f0: f64, f1: f64, sag: f64, most: usize) -> (Vec<Line>, f64) {
+        let dr = self.end_radius - self.radius;
+        let curl = 2.0 * dr.abs() * self.sweep.abs()
+            + self.radius.max(self.end_radius) * self.sweep * self.sweep;
+        let span = (f1 - f0).max(0.0);
+        let n = if sag > 0.0 {
+            (span * (curl / (8.0 * sag)).sqrt()).ceil() as usize
+        } else {
+            most
+        }
+        .clamp(1, most.max(1));
+        let step = span / n as f64;
+        let lines = (0..n)
+            .map(|k| Line {
+                start: self.point_at_fraction(f0 + step * k as f64),
+                end: self.point_at_fraction(if k + 1 == n {
+                    f1
+                } else {
+                    f0 + step * (k + 1) as f64
+                }),
+            })
+            .collect();
+        (lines, step * step / 8.0 * curl)
+    }
 }
 
 impl Blend {

@@ -15,7 +15,7 @@ use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::merge::{CollinearMerge, MergeContext, Verdict};
-use crate::path::{corner_spread, norm, Arc, Blend, BlendExtremes, Line, Poly, Shape, Vec9};
+use crate::path::{corner_spread, norm, Arc, Blend, BlendExtremes, Frame, Line, Poly, Shape, Vec9};
 
 /// What a segment does.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -240,8 +240,8 @@ impl Default for PlannerConfig {
 #[derive(Clone, Copy, Debug)]
 struct Pending {
     segment: Segment,
-    /// The line as programmed (before blends trimmed it), when it is one.
-    programmed: Option<Programmed>,
+    /// The move as programmed, before blends trimmed it.
+    source: AsProgrammed,
     /// The line as trimmed so far.
     line: Option<Line>,
     /// Path mode in force when the move was programmed.
@@ -252,9 +252,90 @@ struct Pending {
     mid_curvature: Vec9,
 }
 
+/// A waiting move as programmed (one field, not two options: waiting
+/// moves are copied often, and every byte shows).
+#[derive(Clone, Copy, Debug)]
+enum AsProgrammed {
+    Line(Programmed),
+    Arc(Arc),
+}
+
 impl Pending {
+    /// The line as programmed, when it is one.
+    fn programmed(&self) -> Option<Programmed> {
+        match self.source {
+            AsProgrammed::Line(p) => Some(p),
+            AsProgrammed::Arc(_) => None,
+        }
+    }
+
+    /// The arc as programmed, when it is one.
+    fn arc(&self) -> Option<Arc> {
+        match self.source {
+            AsProgrammed::Arc(arc) => Some(arc),
+            AsProgrammed::Line(_) => None,
+        }
+    }
+
     fn full_length(&self) -> f64 {
-        self.programmed.map_or(self.segment.length, |p| p.length)
+        match &self.source {
+            AsProgrammed::Line(p) => p.length,
+            AsProgrammed::Arc(arc) => arc.length(),
+        }
+    }
+
+    /// Point, unit tangent and curvature (perpendicular to the tangent) of
+    /// the move as programmed, `leg` mm from its start (`from_end`: from
+    /// its end); `None` unless it is a line or arc that moves X Y Z only.
+    fn frame_in(&self, leg: f64, from_end: bool) -> Option<Frame> {
+        if let Some(p) = self.programmed().filter(|p| p.xyz_only) {
+            let (corner, sign) = if from_end {
+                (p.line.end, -1.0)
+            } else {
+                (p.line.start, 1.0)
+            };
+            return Some(Frame {
+                point: std::array::from_fn(|i| corner[i] + sign * leg * p.direction[i]),
+                tangent: p.direction,
+                curvature: [0.0; 9],
+            });
+        }
+        let arc = self.arc()?;
+        let xyz = arc.plane.0 < 3 && arc.plane.1 < 3 && (3..9).all(|i| arc.start[i] == arc.end[i]);
+        if !xyz {
+            return None;
+        }
+        let full = arc.length();
+        let f = if from_end {
+            1.0 - leg / full
+        } else {
+            leg / full
+        };
+        // A spiral's frame is a hair off unit length and off square; the
+        // blend takes the unit tangent and the curvature across it.
+        let frame = Shape::Arc(arc).frame(f * full);
+        let n = norm(&frame.tangent);
+        let t: Vec9 = std::array::from_fn(|i| frame.tangent[i] / n);
+        let along: f64 = (0..9).map(|i| frame.curvature[i] * t[i]).sum();
+        Some(Frame {
+            point: arc.point_at_fraction(f),
+            tangent: t,
+            curvature: std::array::from_fn(|i| frame.curvature[i] - along * t[i]),
+        })
+    }
+
+    /// The programmed path within `reach` mm of the move's end
+    /// (`from_end`) or start, as lines, and how far they may stray from
+    /// it: the line itself, or chords of the arc within `sag`.
+    fn near(&self, reach: f64, from_end: bool, sag: f64) -> (Vec<Line>, f64) {
+        match &self.source {
+            AsProgrammed::Line(p) => (vec![p.line], 0.0),
+            AsProgrammed::Arc(arc) => {
+                let f = (reach / arc.length()).min(1.0);
+                let (f0, f1) = if from_end { (1.0 - f, 1.0) } else { (0.0, f) };
+                arc.chords(f0, f1, sag, 256)
+            }
+        }
     }
 }
 
@@ -335,6 +416,10 @@ const SHARPEST: f64 = 1.931_851_652_578_136_6; // 2·sin(75°)
 /// Directions closer than this (|u1 − u2|) are one straight line.
 const STRAIGHT: f64 = 1e-9;
 
+/// Where an arc meets another move, tangents closer than this (|u1 − u2|)
+/// are one: rounding in the arc's end points bends them that much.
+const KINK: f64 = 1e-6;
+
 /// The control points of the two halves of a quintic Bézier, split at
 /// u = ½ by de Casteljau: the left half's are the first points of each
 /// level, the right half's the last ones.
@@ -369,33 +454,32 @@ fn hull_within(points: &[[f64; 3]; 6], l: &Line, limit2: f64) -> bool {
     })
 }
 
-/// Halvings [`piece_within`] may make of a quarter before it gives up:
+/// Halvings [`piece_near`] may make of a quarter before it gives up:
 /// pieces of 1/256 of the blend's parameter, whose hulls hug the curve.
 const SUBDIVISIONS: u32 = 6;
 
-/// Whether the quintic piece `points` lies within √`limit2` of `la` or
-/// `lb` everywhere: proven on its hull, or on the hulls of its halves, down
-/// to [`SUBDIVISIONS`] levels; a piece that starts outside both, or cannot
-/// be proven at the last level, fails. A proof, not a sample: sampling
-/// missed peaks narrower than the samples' spacing (stellabee1.ngc
-/// measured 0.0103 mm under P0.01).
-fn piece_within(points: &[[f64; 3]; 6], la: &Line, lb: &Line, limit2: f64, depth: u32) -> bool {
-    if hull_within(points, la, limit2) || hull_within(points, lb, limit2) {
+/// Whether the quintic piece `points` lies within √`limit2` of one of
+/// `lines` everywhere: proven on its hull, or on the hulls of its halves,
+/// down to [`SUBDIVISIONS`] levels; a piece that starts outside them all,
+/// or cannot be proven at the last level, fails. A proof, not a sample:
+/// sampling missed peaks narrower than the samples' spacing
+/// (stellabee1.ngc measured 0.0103 mm under P0.01).
+fn piece_near(points: &[[f64; 3]; 6], lines: &[Line], limit2: f64, depth: u32) -> bool {
+    if lines.iter().any(|l| hull_within(points, l, limit2)) {
         return true;
     }
     // The piece's first control point is on the curve.
     let start = [points[0]; 6];
-    if depth == 0 || !(hull_within(&start, la, limit2) || hull_within(&start, lb, limit2)) {
+    if depth == 0 || !lines.iter().any(|l| hull_within(&start, l, limit2)) {
         return false;
     }
     let (left, right) = halves(points);
-    piece_within(&left, la, lb, limit2, depth - 1)
-        && piece_within(&right, la, lb, limit2, depth - 1)
+    piece_near(&left, lines, limit2, depth - 1) && piece_near(&right, lines, limit2, depth - 1)
 }
 
 /// The blend with control points `q` within `tolerance` of line `la` or
 /// `lb` everywhere (proven by subdividing each quarter that `proven` does
-/// not cover, see [`piece_within`]), and |B′| at least `min_speed` at 31
+/// not cover, see [`piece_near`]), and |B′| at least `min_speed` at 31
 /// evenly spaced parameters. What `proven` (from [`hull_bounds`]) already
 /// guarantees is not computed again.
 fn sampled_within(
@@ -412,10 +496,9 @@ fn sampled_within(
     let (left, right) = halves(&points);
     let (q0, q1) = halves(&left);
     let (q2, q3) = halves(&right);
-    let near = [q0, q1, q2, q3]
-        .iter()
-        .enumerate()
-        .all(|(n, piece)| proven.quarters[n] || piece_within(piece, la, lb, limit2, SUBDIVISIONS));
+    let near = [q0, q1, q2, q3].iter().enumerate().all(|(n, piece)| {
+        proven.quarters[n] || piece_near(piece, &[*la, *lb], limit2, SUBDIVISIONS)
+    });
     if !near {
         return false;
     }
@@ -936,7 +1019,7 @@ impl<'k> Planner<'k> {
         segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
-            programmed: Some(Programmed::new(line)),
+            source: AsProgrammed::Line(Programmed::new(line)),
             line: Some(line),
             mode: self.mode,
             start_leg: 0.0,
@@ -958,7 +1041,7 @@ impl<'k> Planner<'k> {
         segment.outputs = self.take_sync_outputs();
         self.pending.push_back(Pending {
             segment,
-            programmed: None,
+            source: AsProgrammed::Arc(arc),
             line: None,
             mode: self.mode,
             start_leg: 0.0,
@@ -973,7 +1056,7 @@ impl<'k> Planner<'k> {
     /// Each leg is the tolerance's leg or half its line, whichever is less,
     /// so on dense paths blends meet at line midpoints.
     fn legs(&self, a: &Pending, b: &Pending) -> Option<(f64, f64)> {
-        let (Some(la), Some(lb)) = (&a.programmed, &b.programmed) else {
+        let (Some(la), Some(lb)) = (a.programmed(), b.programmed()) else {
             return None;
         };
         let PathMode::Blend { tolerance } = b.mode else {
@@ -1026,7 +1109,7 @@ impl<'k> Planner<'k> {
         k0: &Vec9,
         k1: &Vec9,
     ) -> Option<[Vec9; 6]> {
-        let (pa, pb) = (a.programmed.as_ref()?, b.programmed.as_ref()?);
+        let (pa, pb) = (a.programmed()?, b.programmed()?);
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
@@ -1071,6 +1154,12 @@ impl<'k> Planner<'k> {
             if both_lines && n < 3 && !last {
                 return; // the midpoint of pending[1] depends on the next move
             }
+            if !both_lines {
+                if let Some((legs, control)) = self.choose_arc_blend() {
+                    self.blend_corner(legs, control, [0.0; 9]);
+                    continue;
+                }
+            }
             let Some((legs, control, k1)) = self.choose_blend(both_lines) else {
                 // No blend here, or none fits: stop (or go straight on) at
                 // the corner.
@@ -1078,56 +1167,141 @@ impl<'k> Planner<'k> {
                 self.release_front(exit);
                 continue;
             };
-            let a = &self.pending[0];
-            let corner = a.programmed.expect("a line").line.end;
-            let (u1, u2) = (
-                a.programmed.expect("a line").direction,
-                self.pending[1].programmed.expect("a line").direction,
-            );
-            // Trim a and b in place: a waiting move is over a kilobyte, and
-            // copies of them showed in profiles.
-            let a = &mut self.pending[0];
-            let mut trimmed = a.line.expect("a line");
-            trimmed.end = std::array::from_fn(|i| corner[i] - legs.0 * u1[i]);
+            self.blend_corner(legs, control, k1);
+        }
+    }
+
+    /// Trim the first two waiting moves (lines or arcs) by `legs`, emit
+    /// the first, and emit the blend with control points `control` that
+    /// joins them; the second keeps waiting, with curvature `k1` chosen at
+    /// its midpoint.
+    fn blend_corner(&mut self, legs: (f64, f64), control: [Vec9; 6], k1: Vec9) {
+        // Trim a and b in place: a waiting move is over a kilobyte, and
+        // copies of them showed in profiles.
+        let a = &mut self.pending[0];
+        let full = a.full_length();
+        if let (Some(p), Some(mut trimmed)) = (a.programmed(), a.line) {
+            trimmed.end = std::array::from_fn(|i| p.line.end[i] - legs.0 * p.direction[i]);
             a.segment.shape = Shape::Line(trimmed);
-            a.segment.length = trimmed.length();
-            let a_kind = a.segment.kind;
-            let a_feed = a.segment.feed;
-            // Equal tangents and curvatures meet at both ends of the blend;
-            // a consumed line leaves nothing (or rounding) between blends.
-            if a.segment.length > 1e-9 * a.full_length().max(1.0) {
-                self.release_front(f64::INFINITY);
-            } else {
-                self.pending.pop_front();
-            }
-            let b = self.pending.front_mut().expect("b waits");
-            let mut b_line = b.line.expect("a line");
-            b_line.start = std::array::from_fn(|i| corner[i] + legs.1 * u2[i]);
+        } else if let Some(arc) = a.arc() {
+            let f0 = a.start_leg / full;
+            a.segment.shape = Shape::Arc(arc.part(f0, (1.0 - legs.0 / full).max(f0)));
+        }
+        a.segment.length = a.segment.shape.length();
+        let a_kind = a.segment.kind;
+        let a_feed = a.segment.feed;
+        // Equal tangents and curvatures meet at both ends of the blend;
+        // a consumed move leaves nothing (or rounding) between blends.
+        if a.segment.length > 1e-9 * full.max(1.0) {
+            self.release_front(f64::INFINITY);
+        } else {
+            self.pending.pop_front();
+        }
+        let b = self.pending.front_mut().expect("b waits");
+        let full = b.full_length();
+        if let (Some(p), Some(mut b_line)) = (b.programmed(), b.line) {
+            b_line.start = std::array::from_fn(|i| p.line.start[i] + legs.1 * p.direction[i]);
             b.line = Some(b_line);
             b.segment.shape = Shape::Line(b_line);
-            b.segment.length = b_line.length();
-            b.start_leg = legs.1;
-            b.mid_curvature = k1;
-            let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
-            let b_force = b.segment.force_control;
-            // Line b's motion now starts with the blend.
-            let b_outputs = std::mem::take(&mut b.segment.outputs);
-            let kind = if a_kind == SegmentKind::Rapid && b_kind == SegmentKind::Rapid {
-                SegmentKind::Rapid
-            } else {
-                SegmentKind::Feed
-            };
-            // The blend's table and what its limits need in one pass.
-            let (shape, extremes) = Blend::sampled(control);
-            let mut blend =
-                self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
-            blend.feed = a_feed.min(b_feed);
-            // The blend starts line b, so it carries b's force setting, not
-            // whatever the program has set since.
-            blend.force_control = b_force;
-            blend.outputs = b_outputs;
-            self.emit(blend, f64::INFINITY);
+        } else if let Some(arc) = b.arc() {
+            b.segment.shape = Shape::Arc(arc.part(legs.1 / full, 1.0));
         }
+        b.segment.length = b.segment.shape.length();
+        b.start_leg = legs.1;
+        b.mid_curvature = k1;
+        let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
+        let b_force = b.segment.force_control;
+        // Move b's motion now starts with the blend.
+        let b_outputs = std::mem::take(&mut b.segment.outputs);
+        let kind = if a_kind == SegmentKind::Rapid && b_kind == SegmentKind::Rapid {
+            SegmentKind::Rapid
+        } else {
+            SegmentKind::Feed
+        };
+        // The blend's table and what its limits need in one pass.
+        let (shape, extremes) = Blend::sampled(control);
+        let mut blend =
+            self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
+        blend.feed = a_feed.min(b_feed);
+        // The blend starts move b, so it carries b's force setting, not
+        // whatever the program has set since.
+        blend.force_control = b_force;
+        blend.outputs = b_outputs;
+        self.emit(blend, f64::INFINITY);
+    }
+
+    /// The blend at the corner between the first two waiting moves when
+    /// either is an arc (lines and arcs that move X Y Z only, in G64 with
+    /// a finite tolerance, turning more than [`KINK`] and at most
+    /// [`SHARPEST`]): its legs and control points, if one fits.
+    ///
+    /// Its ends take the point, tangent and curvature of the line or arc
+    /// they join, so the path stays G2-continuous; each leg is at most half
+    /// its move, so blends at both ends of a move never overlap. It must be
+    /// proven within the tolerance of the programmed line, or of chords of
+    /// the programmed arc less how far those chords stray from it (see
+    /// [`piece_near`]); the legs shrink until it is.
+    fn choose_arc_blend(&self) -> Option<((f64, f64), [Vec9; 6])> {
+        let (a, b) = (&self.pending[0], &self.pending[1]);
+        let PathMode::Blend { tolerance } = b.mode else {
+            return None;
+        };
+        if (a.arc().is_none() && b.arc().is_none()) || !tolerance.is_finite() {
+            return None;
+        }
+        let (end, start) = (a.frame_in(0.0, true)?, b.frame_in(0.0, false)?);
+        let bend = norm(&std::array::from_fn(|i| start.tangent[i] - end.tangent[i]));
+        if !(bend > KINK && bend <= SHARPEST) {
+            return None;
+        }
+        let (full_a, full_b) = (a.full_length(), b.full_length());
+        let spread = corner_spread(bend);
+        // The leg a line–line blend would take, then shorter ones.
+        let mut leg = tolerance / Blend::deviation(1.0, &end.tangent, &start.tangent);
+        for _ in 0..12 {
+            let legs = (leg.min(full_a / 2.0), leg.min(full_b / 2.0));
+            leg *= 0.7;
+            if legs.0.min(legs.1) < 1e-9 {
+                return None;
+            }
+            let (p0, p1) = (a.frame_in(legs.0, true)?, b.frame_in(legs.1, false)?);
+            let scale = spread * (legs.0 + legs.1);
+            let control = Blend::hermite_control(
+                &p0.point,
+                &p0.tangent,
+                &p0.curvature,
+                &p1.point,
+                &p1.tangent,
+                &p1.curvature,
+                scale,
+            );
+            let poly = Poly::new(&control);
+            if !(1..32).all(|k| poly.speed(k as f64 / 32.0) >= 0.3 * scale) {
+                continue;
+            }
+            // The blend is shorter than its control polygon, so it stays
+            // within that much path of the corner on either side.
+            let reach = legs.0 + legs.1 + tolerance;
+            let (mut near, sag_a) = a.near(reach, true, 0.05 * tolerance);
+            let (near_b, sag_b) = b.near(reach, false, 0.05 * tolerance);
+            near.extend(near_b);
+            let limit = tolerance * (1.0 - 1e-9) - sag_a.max(sag_b);
+            if limit <= 0.0 {
+                continue;
+            }
+            let points: [[f64; 3]; 6] =
+                std::array::from_fn(|k| [control[k][0], control[k][1], control[k][2]]);
+            // Halves first (the one on a line often lies near it whole),
+            // then as deep as the line–line test goes.
+            let (left, right) = halves(&points);
+            if [left, right]
+                .iter()
+                .all(|piece| piece_near(piece, &near, limit * limit, SUBDIVISIONS + 1))
+            {
+                return Some((legs, control));
+            }
+        }
+        None
     }
 
     /// The blend at the corner between the first two waiting moves, if they
@@ -1151,9 +1325,9 @@ impl<'k> Planner<'k> {
         let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
             let candidate = Self::mid_curvature(
-                &a.programmed.unwrap(),
-                &b.programmed.unwrap(),
-                &c.programmed.unwrap(),
+                &a.programmed().unwrap(),
+                &b.programmed().unwrap(),
+                &c.programmed().unwrap(),
             );
             if let Some(bl) = Self::blend_within(a, b, legs, &k0, &candidate) {
                 if Self::blend_within(b, c, legs_bc, &candidate, &zero).is_some() {
@@ -1190,7 +1364,7 @@ impl<'k> Planner<'k> {
         let limit = if a.line.is_some() && b.line.is_some() {
             STRAIGHT
         } else {
-            1e-6
+            KINK
         };
         if bend > limit {
             return 0.0;
@@ -1240,7 +1414,7 @@ impl<'k> Planner<'k> {
     fn release_front(&mut self, exit: f64) {
         let p = &self.pending[0];
         if p.segment.length > 0.0 {
-            let limits = match (p.segment.max_velocity.is_nan(), &p.programmed) {
+            let limits = match (p.segment.max_velocity.is_nan(), p.programmed()) {
                 (true, Some(programmed)) => {
                     Some(self.path_limits(&Shape::Line(programmed.line), programmed.length, None))
                 }
@@ -1741,5 +1915,165 @@ mod tests {
             s.max_velocity
         );
         assert!(s.max_acceleration <= 500.0 + 1e-9);
+    }
+
+    /// Plans `text` and runs it offline on `k` under G64 P`tolerance`;
+    /// returns the segments and the run's (largest deviation from the
+    /// programmed path, largest limit use).
+    fn planned_and_run(k: &dyn Kinematics, tolerance: f64, text: &str) -> (Vec<Segment>, f64, f64) {
+        let config = PlannerConfig {
+            mode: PathMode::Blend { tolerance },
+            ..Default::default()
+        };
+        let segs = plan(k, config, text);
+        let report = crate::offline::run(
+            Interpreter::from_text(text, "t.ngc", Position::ZERO),
+            k,
+            Position::ZERO,
+            crate::offline::RunConfig {
+                planner: config,
+                record: 0,
+            },
+        )
+        .unwrap();
+        (segs, report.max_deviation, report.max_limit_ratio())
+    }
+
+    /// Frames on both sides of each junction between motion segments:
+    /// (largest tangent step, largest curvature step).
+    fn junction_steps(segs: &[Segment]) -> (f64, f64) {
+        segs.windows(2)
+            .filter(|w| w[0].is_motion() && w[1].is_motion())
+            .fold((0.0, 0.0), |(t, k), w| {
+                let (a, b) = (w[0].shape.frame(w[0].length), w[1].shape.frame(0.0));
+                let dt = norm(&std::array::from_fn(|i| b.tangent[i] - a.tangent[i]));
+                let dk = norm(&std::array::from_fn(|i| b.curvature[i] - a.curvature[i]));
+                (t.max(dt), k.max(dk))
+            })
+    }
+
+    /// Six corners where arcs meet lines or arcs at 90°: line into arc and
+    /// arc into line in XY, arc into arc, an arc in XZ (G18), a helix. Under
+    /// G64 P each gets a blend that joins with the tangent and curvature
+    /// of what it meets, so the tool does not stop until the end; the run
+    /// stays within P of the programmed path (measured on the executed
+    /// trajectory against the arcs as programmed) and within every limit.
+    /// Under G61 the same corners stop.
+    #[test]
+    fn arc_corners_blend_g2_continuously_within_tolerance() {
+        let k = xyz(200.0, 1000.0, 5e4);
+        // (10,0) heading +X into a CW arc that starts heading +Y; it ends
+        // at (20,0) heading −Y into a line heading +X; a CCW arc starting
+        // heading −Y ends at (40,0) heading +Y into a CW arc starting
+        // heading −X; it ends at (40,10) heading +X; an XZ arc starts
+        // heading −Z... then a helix quarter turn and a line.
+        let text = "G21 G17 G90 G1 X10 F3000\nG2 X20 R5\nG1 X30\nG3 X40 R5\nG2 Y10 R5\n\
+                    G18 G2 X50 Z0 R5\nG17 G1 X55\nG3 X60 Y15 Z-2 R5\nG1 X50\nM2\n";
+        for tolerance in [0.005, 0.05, 0.5] {
+            let (segs, deviation, limits) = planned_and_run(&k, tolerance, text);
+            let blends = segs
+                .iter()
+                .filter(|s| matches!(s.shape, Shape::Blend(_)))
+                .count();
+            assert_eq!(blends, 8, "P{tolerance}: one blend per corner");
+            let motion: Vec<&Segment> = segs.iter().filter(|s| s.is_motion()).collect();
+            let stops = motion[..motion.len() - 1]
+                .iter()
+                .filter(|s| s.exit_velocity == 0.0)
+                .count();
+            assert_eq!(stops, 0, "P{tolerance}: no stop before the end");
+            let (dt, dk) = junction_steps(&segs);
+            assert!(dt < 1e-9 && dk < 1e-6, "P{tolerance}: steps {dt} {dk}");
+            assert!(
+                deviation <= tolerance * (1.0 + 1e-9),
+                "P{tolerance}: deviation {deviation}"
+            );
+            assert!(
+                deviation > 0.3 * tolerance,
+                "P{tolerance}: the blends should use the tolerance, deviation {deviation}"
+            );
+            assert!(limits <= 1.0 + 1e-6, "P{tolerance}: limit use {limits}");
+            let end = motion.last().unwrap().end();
+            assert!(
+                (end.x - 50.0).abs() < 1e-12
+                    && (end.y - 15.0).abs() < 1e-12
+                    && (end.z + 2.0).abs() < 1e-12
+            );
+        }
+        let exact = plan(
+            &k,
+            PlannerConfig {
+                mode: PathMode::ExactPath,
+                ..Default::default()
+            },
+            text,
+        );
+        let stops = exact
+            .iter()
+            .filter(|s| s.is_motion() && s.exit_velocity == 0.0)
+            .count();
+        assert_eq!(stops, 9, "G61: a stop at each of 8 corners and the end");
+    }
+
+    /// Random chains of lines, arcs and helices (seeded; corners of every
+    /// angle, radii from half the chord to three times it): the run stays
+    /// within the tolerance of the programmed path and within the limits,
+    /// and every junction the planner passes at speed is G2-continuous.
+    #[test]
+    fn random_line_and_arc_chains_blend_within_tolerance_and_limits() {
+        let k = xyz(150.0, 1500.0, 7.5e4);
+        let mut rng = crate::testkit::uniform(0x2545_f491_4f6c_dd1d);
+        let mut blends = 0;
+        for case in 0..24 {
+            let mut text = String::from("G21 G17 G90 F6000\n");
+            let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
+            for _ in 0..16 {
+                let len = if rng() < 0.3 {
+                    0.05 + rng() * 0.5
+                } else {
+                    1.0 + rng() * 20.0
+                };
+                let angle = rng() * std::f64::consts::TAU;
+                let round = |v: f64| (v * 1e4).round() / 1e4;
+                x = round(x + len * angle.cos());
+                y = round(y + len * angle.sin());
+                if rng() < 0.2 {
+                    z = round(-rng() * 5.0);
+                }
+                if rng() < 0.5 {
+                    let code = if rng() < 0.5 { "G2" } else { "G3" };
+                    let r = len / 2.0 * (1.0 + 2.0 * rng()) + 1e-3;
+                    text += &format!("{code} X{x:.4} Y{y:.4} Z{z:.4} R{r:.4}\n");
+                } else {
+                    text += &format!("G1 X{x:.4} Y{y:.4} Z{z:.4}\n");
+                }
+            }
+            text += "M2\n";
+            let tolerance = [0.005, 0.05, 0.5][case % 3];
+            let (segs, deviation, limits) = planned_and_run(&k, tolerance, &text);
+            assert!(
+                deviation <= tolerance * (1.0 + 1e-9) && limits <= 1.0 + 1e-6,
+                "case {case} P{tolerance}: deviation {deviation}, limit use {limits}\n{text}"
+            );
+            blends += segs
+                .iter()
+                .filter(|s| matches!(s.shape, Shape::Blend(_)))
+                .count();
+            for w in segs
+                .windows(2)
+                .filter(|w| w[0].is_motion() && w[1].is_motion())
+            {
+                if w[0].exit_velocity > 0.0 && w[0].exit_velocity.is_finite() {
+                    let (dt, _) = junction_steps(w);
+                    assert!(
+                        dt <= KINK,
+                        "case {case}: a kink of {dt} passed at speed\n{text}"
+                    );
+                }
+            }
+        }
+        // 24 × 15 corners, a sixth sharper than 150° (not blended), a few
+        // with moves too short for any blend to fit the tolerance.
+        assert!(blends >= 24 * 15 * 3 / 4, "{blends} blends");
     }
 }
