@@ -426,7 +426,8 @@ fn a_curvature_jump_caps_the_junction_at_four_times_the_planners_jerk_budget() {
     let machine = mill3();
     let kins = &*machine.kinematics;
     let start = Position::xyz(10.0, 10.0, -10.0);
-    let text = "G1 X20 F6000\nG3 X25 Y15 I0 J5\nM2\n";
+    // G61: under G64 P the planner blends such a junction instead.
+    let text = "G61 G1 X20 F6000\nG3 X25 Y15 I0 J5\nM2\n";
     let speed_at_junction = |p: &Profile| {
         speeds_between(p, 10.0 - 1e-9, 10.0 + 1e-9)
             .into_iter()

@@ -1233,7 +1233,9 @@ impl<'k> Planner<'k> {
     /// The blend at the corner between the first two waiting moves when
     /// either is an arc (lines and arcs that move X Y Z only, in G64 with
     /// a finite tolerance, turning more than [`KINK`] and at most
-    /// [`SHARPEST`]): its legs and control points, if one fits.
+    /// [`SHARPEST`], or tangent where the curvature jump caps the speed
+    /// below the arc's own limit): its legs and control points, if one
+    /// fits.
     ///
     /// Its ends take the point, tangent and curvature of the line or arc
     /// they join, so the path stays G2-continuous; each leg is at most half
@@ -1251,13 +1253,30 @@ impl<'k> Planner<'k> {
         }
         let (end, start) = (a.frame_in(0.0, true)?, b.frame_in(0.0, false)?);
         let bend = norm(&std::array::from_fn(|i| start.tangent[i] - end.tangent[i]));
-        if !(bend > KINK && bend <= SHARPEST) {
+        let mut leg = if bend > KINK && bend <= SHARPEST {
+            // The leg a line–line blend would take, then shorter ones.
+            tolerance / Blend::deviation(1.0, &end.tangent, &start.tangent)
+        } else if bend <= KINK {
+            // Tangent, but the curvature jumps: worth a transition only
+            // where the jump's speed cap is below what the arc allows.
+            let jump: Vec9 = std::array::from_fn(|i| start.curvature[i] - end.curvature[i]);
+            let arc_speed = [a, b]
+                .iter()
+                .filter(|p| p.arc().is_some())
+                .map(|p| p.segment.max_velocity)
+                .fold(f64::INFINITY, f64::min);
+            if self.curvature_jump_cap(&jump) >= arc_speed {
+                return None;
+            }
+            // A clothoid of length L from a line into a circle of
+            // curvature κ shifts the circle by L²·κ/24: a leg of L/2
+            // either side for the tolerance.
+            (6.0 * tolerance / norm(&jump)).sqrt()
+        } else {
             return None;
-        }
+        };
         let (full_a, full_b) = (a.full_length(), b.full_length());
         let spread = corner_spread(bend);
-        // The leg a line–line blend would take, then shorter ones.
-        let mut leg = tolerance / Blend::deviation(1.0, &end.tangent, &start.tangent);
         for _ in 0..12 {
             let legs = (leg.min(full_a / 2.0), leg.min(full_b / 2.0));
             leg *= 0.7;
@@ -2013,6 +2032,64 @@ mod tests {
             .filter(|s| s.is_motion() && s.exit_velocity == 0.0)
             .count();
         assert_eq!(stops, 9, "G61: a stop at each of 8 corners and the end");
+    }
+
+    /// Five tangent junctions where the curvature jumps (line into arc,
+    /// arc into line, and an S-bend where it reverses): under G61 each
+    /// holds the speed to √(J·T/|Δκ|) (15.8 and 11.2 mm/s here); under
+    /// G64 P a G2 transition replaces each, the tool passes at over 1.5
+    /// times that, and the run stays within P and the limits.
+    #[test]
+    fn tangent_arc_junctions_get_transitions_instead_of_the_jump_cap() {
+        let k = xyz(200.0, 1000.0, 5e4);
+        let text = "G21 G17 G90 G1 X20 F6000\nG3 X25 Y5 I0 J5\nG1 Y15\nG2 X30 Y20 I5 J0\n\
+                    G3 X35 Y25 I0 J5\nG1 Y35\nM2\n";
+        let exact = plan(
+            &k,
+            PlannerConfig {
+                mode: PathMode::ExactPath,
+                ..Default::default()
+            },
+            text,
+        );
+        let caps: Vec<f64> = exact
+            .iter()
+            .filter(|s| s.is_motion())
+            .map(|s| s.exit_velocity)
+            .collect();
+        let jump_cap = |dk: f64| (5e4 * 0.001 / dk).sqrt();
+        let want = [
+            jump_cap(0.2),
+            jump_cap(0.2),
+            jump_cap(0.2),
+            jump_cap(0.4),
+            jump_cap(0.2),
+            0.0,
+        ];
+        assert_eq!(caps.len(), want.len(), "{caps:?}");
+        for (got, want) in caps.iter().zip(want) {
+            assert!((got - want).abs() <= 1e-9 * want.max(1.0), "{caps:?}");
+        }
+        let tolerance = 0.01;
+        let (segs, deviation, limits) = planned_and_run(&k, tolerance, text);
+        let blends = segs
+            .iter()
+            .filter(|s| matches!(s.shape, Shape::Blend(_)))
+            .count();
+        assert_eq!(blends, 5);
+        let slowest = segs
+            .iter()
+            .filter(|s| s.is_motion())
+            .map(|s| s.max_velocity)
+            .fold(f64::INFINITY, f64::min);
+        assert!(slowest > 1.5 * jump_cap(0.2), "slowest {slowest}");
+        let (dt, dk) = junction_steps(&segs);
+        assert!(dt < 1e-9 && dk < 1e-6, "steps {dt} {dk}");
+        assert!(
+            deviation <= tolerance * (1.0 + 1e-9),
+            "deviation {deviation}"
+        );
+        assert!(limits <= 1.0 + 1e-6, "limit use {limits}");
     }
 
     /// Random chains of lines, arcs and helices (seeded; corners of every
