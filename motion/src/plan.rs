@@ -1958,6 +1958,15 @@ mod tests {
         (segs, report.max_deviation, report.max_limit_ratio())
     }
 
+    /// `text` planned under G61 (exact path).
+    fn plan_exact_path(k: &dyn Kinematics, text: &str) -> Vec<Segment> {
+        let config = PlannerConfig {
+            mode: PathMode::ExactPath,
+            ..Default::default()
+        };
+        plan(k, config, text)
+    }
+
     /// Frames on both sides of each junction between motion segments:
     /// (largest tangent step, largest curvature step).
     fn junction_steps(segs: &[Segment]) -> (f64, f64) {
@@ -2019,14 +2028,7 @@ mod tests {
                     && (end.z + 2.0).abs() < 1e-12
             );
         }
-        let exact = plan(
-            &k,
-            PlannerConfig {
-                mode: PathMode::ExactPath,
-                ..Default::default()
-            },
-            text,
-        );
+        let exact = plan_exact_path(&k, text);
         let stops = exact
             .iter()
             .filter(|s| s.is_motion() && s.exit_velocity == 0.0)
@@ -2044,14 +2046,7 @@ mod tests {
         let k = xyz(200.0, 1000.0, 5e4);
         let text = "G21 G17 G90 G1 X20 F6000\nG3 X25 Y5 I0 J5\nG1 Y15\nG2 X30 Y20 I5 J0\n\
                     G3 X35 Y25 I0 J5\nG1 Y35\nM2\n";
-        let exact = plan(
-            &k,
-            PlannerConfig {
-                mode: PathMode::ExactPath,
-                ..Default::default()
-            },
-            text,
-        );
+        let exact = plan_exact_path(&k, text);
         let caps: Vec<f64> = exact
             .iter()
             .filter(|s| s.is_motion())
