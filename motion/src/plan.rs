@@ -477,15 +477,14 @@ fn piece_near(points: &[[f64; 3]; 6], lines: &[Line], limit2: f64, depth: u32) -
     piece_near(&left, lines, limit2, depth - 1) && piece_near(&right, lines, limit2, depth - 1)
 }
 
-/// The blend with control points `q` within `tolerance` of line `la` or
-/// `lb` everywhere (proven by subdividing each quarter that `proven` does
-/// not cover, see [`piece_near`]), and |B′| at least `min_speed` at 31
+/// The blend with control points `q` within `tolerance` of one of `lines`
+/// everywhere (proven by subdividing each quarter that `proven` does not
+/// cover, see [`piece_near`]), and |B′| at least `min_speed` at 31
 /// evenly spaced parameters. What `proven` (from [`hull_bounds`]) already
 /// guarantees is not computed again.
 fn sampled_within(
     q: &[Vec9; 6],
-    la: &Line,
-    lb: &Line,
+    lines: &[Line],
     tolerance: f64,
     min_speed: f64,
     proven: &Proven,
@@ -496,9 +495,10 @@ fn sampled_within(
     let (left, right) = halves(&points);
     let (q0, q1) = halves(&left);
     let (q2, q3) = halves(&right);
-    let near = [q0, q1, q2, q3].iter().enumerate().all(|(n, piece)| {
-        proven.quarters[n] || piece_near(piece, &[*la, *lb], limit2, SUBDIVISIONS)
-    });
+    let near = [q0, q1, q2, q3]
+        .iter()
+        .enumerate()
+        .all(|(n, piece)| proven.quarters[n] || piece_near(piece, lines, limit2, SUBDIVISIONS));
     if !near {
         return false;
     }
@@ -1132,7 +1132,7 @@ impl<'k> Planner<'k> {
         // where |B′| all but vanishes and arc length stops being usable.
         let min_speed = 0.3 * scale;
         let proven = hull_bounds(&control, la, lb, tolerance, min_speed);
-        (proven.all() || sampled_within(&control, la, lb, tolerance, min_speed, &proven))
+        (proven.all() || sampled_within(&control, &[*la, *lb], tolerance, min_speed, &proven))
             .then_some(control)
     }
 
@@ -1294,29 +1294,15 @@ impl<'k> Planner<'k> {
                 &p1.curvature,
                 scale,
             );
-            let poly = Poly::new(&control);
-            if !(1..32).all(|k| poly.speed(k as f64 / 32.0) >= 0.3 * scale) {
-                continue;
-            }
             // The blend is shorter than its control polygon, so it stays
             // within that much path of the corner on either side.
             let reach = legs.0 + legs.1 + tolerance;
             let (mut near, sag_a) = a.near(reach, true, 0.05 * tolerance);
             let (near_b, sag_b) = b.near(reach, false, 0.05 * tolerance);
             near.extend(near_b);
-            let limit = tolerance * (1.0 - 1e-9) - sag_a.max(sag_b);
-            if limit <= 0.0 {
-                continue;
-            }
-            let points: [[f64; 3]; 6] =
-                std::array::from_fn(|k| [control[k][0], control[k][1], control[k][2]]);
-            // Halves first (the one on a line often lies near it whole),
-            // then as deep as the line–line test goes.
-            let (left, right) = halves(&points);
-            if [left, right]
-                .iter()
-                .all(|piece| piece_near(piece, &near, limit * limit, SUBDIVISIONS + 1))
-            {
+            let limit = tolerance - sag_a.max(sag_b);
+            let nothing = Proven::default();
+            if limit > 0.0 && sampled_within(&control, &near, limit, 0.3 * scale, &nothing) {
                 return Some((legs, control));
             }
         }
@@ -1811,14 +1797,14 @@ mod tests {
             let proven = hull_bounds(&control, &la, &lb, tolerance, min_speed);
             let sure = proven.all();
             let nothing = Proven::default();
-            let ok = sampled_within(&control, &la, &lb, tolerance, min_speed, &nothing);
+            let ok = sampled_within(&control, &[la, lb], tolerance, min_speed, &nothing);
             assert!(
                 ok || !sure,
                 "fast test accepted a failing blend: {control:?}"
             );
             // What the bounds prove the samples would confirm: skipping it
             // changes no decision.
-            let skipping = sampled_within(&control, &la, &lb, tolerance, min_speed, &proven);
+            let skipping = sampled_within(&control, &[la, lb], tolerance, min_speed, &proven);
             assert_eq!(ok, skipping, "{proven:?} {control:?}");
             fast += sure as usize;
             sampled += ok as usize;
