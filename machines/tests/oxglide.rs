@@ -196,8 +196,17 @@ fn forward_matches_circles(name: &str, sign: f64, s1: f64, s2: f64, s3: f64) {
                 "{p:?} vs {x} {z}"
             );
             assert_eq!(p.y, s3);
+            // Eqs. (7)–(10) give |∂s_i/∂z| = |z ∓ D|/w_i ≤ L_i/w_i, so a
+            // pose good to TOL only pins the sliders to TOL·(1 + L_i/w_i):
+            // near a rod standing upright (w_i → 0) that is far looser.
+            let w1 = (L1 * L1 - (p.z + D).powi(2)).sqrt();
+            let w2 = (L2 * L2 - (p.z - D).powi(2)).sqrt();
             let q = inverse(&*k, p).unwrap();
-            assert!((q[0] - s1).abs() < TOL && (q[1] - s2).abs() < TOL, "{q:?}");
+            assert!(
+                (q[0] - s1).abs() < TOL * (1.0 + L1 / w1)
+                    && (q[1] - s2).abs() < TOL * (1.0 + L2 / w2),
+                "{q:?} (rod widths {w1} {w2})"
+            );
         }
         Err(e) => {
             // Only refusals the geometry backs up: no pose of this form, or
@@ -209,6 +218,18 @@ fn forward_matches_circles(name: &str, sign: f64, s1: f64, s2: f64, s3: f64) {
             });
             assert!(expected.is_empty() || !p_ok, "{e} but {expected:?}");
         }
+    }
+}
+
+/// Rod l2 almost upright: there the sliders depend L2/w2 times more on z
+/// than on x, and a random search once found the old fixed joint tolerance
+/// too tight at w2 = 0.033 mm.
+#[test]
+fn crossed_forward_next_to_the_upright_rod() {
+    for w2 in [0.03, 0.01, 0.003] {
+        let z = D - (L2 * L2 - w2 * w2).sqrt();
+        let (s1, s2) = paper_crossed(133.0, z);
+        forward_matches_circles("oxglide-x", 1.0, s1, s2, 0.0);
     }
 }
 
@@ -225,6 +246,13 @@ fn in_travel(name: &'static str) -> impl Strategy<Value = Position> {
 }
 
 proptest! {
+    // A fixed seed keeps every run the same case list (tests must be
+    // deterministic); change it here to explore other cases.
+    #![proptest_config(ProptestConfig {
+        rng_seed: prop::test_runner::RngSeed::Fixed(0x6b65_7266_0020),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
     #[test]
     fn crossed_round_trip_over_the_travel(p in in_travel("oxglide-x")) {
         let k = machine("oxglide-x");
