@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
-use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
+use crate::kinematics::{Kinematics, Limits, LIMIT_SLACK, MAX_JOINTS};
 use crate::merge::{CollinearMerge, MergeContext, Verdict};
 use crate::path::{corner_spread, norm, Arc, Blend, BlendExtremes, Frame, Line, Poly, Shape, Vec9};
 
@@ -369,6 +369,10 @@ pub struct Planner<'k> {
     limits: [Option<Limits>; 9],
     /// Joints that need sampling through the kinematics (false: all joints are axes).
     sample_joints: bool,
+    /// X Y Z travel, (min, max) mm, with the strokes of joints that move
+    /// exactly with an axis folded in: where a blend may go when
+    /// `sample_joints` is false.
+    travel: [(f64, f64); 3],
     mode: PathMode,
     /// The F word, mm/min (mm/rev in feed-per-revolution mode).
     feed_word: f64,
@@ -477,6 +481,23 @@ fn piece_near(points: &[[f64; 3]; 6], lines: &[Line], limit2: f64, depth: u32) -
     piece_near(&left, lines, limit2, depth - 1) && piece_near(&right, lines, limit2, depth - 1)
 }
 
+/// Whether the quintic piece `points` lies inside the box `travel`
+/// (within [`LIMIT_SLACK`]): proven on its control points (the box is
+/// convex), or on its halves', down to `depth` levels.
+fn hull_in_box(points: &[[f64; 3]; 6], travel: &[(f64, f64); 3], depth: u32) -> bool {
+    let inside = |p: &[f64; 3]| {
+        (0..3).all(|i| p[i] >= travel[i].0 - LIMIT_SLACK && p[i] <= travel[i].1 + LIMIT_SLACK)
+    };
+    if points.iter().all(inside) {
+        return true;
+    }
+    if depth == 0 || !inside(&points[0]) || !inside(&points[5]) {
+        return false;
+    }
+    let (left, right) = halves(points);
+    hull_in_box(&left, travel, depth - 1) && hull_in_box(&right, travel, depth - 1)
+}
+
 /// The blend with control points `q` within `tolerance` of one of `lines`
 /// everywhere (proven by subdividing each quarter that `proven` does not
 /// cover, see [`piece_near`]), and |B′| at least `min_speed` at 31
@@ -574,12 +595,20 @@ impl<'k> Planner<'k> {
     /// A planner for the machine `kins`, starting at `start`.
     pub fn new(kins: &'k dyn Kinematics, start: Position, config: PlannerConfig) -> Self {
         let mut limits = [None; 9];
+        let mut travel = [(f64::NEG_INFINITY, f64::INFINITY); 3];
         for spec in kins.axes() {
             limits[spec.axis.index()] = Some(spec.limits);
+            if let Some(t) = travel.get_mut(spec.axis.index()) {
+                *t = (spec.limits.min, spec.limits.max);
+            }
         }
         let mut sample_joints = false;
         for (j, spec) in kins.joints().iter().enumerate() {
-            match kins.joint_axis(j).and_then(|a| limits[a.index()].as_mut()) {
+            let axis = kins.joint_axis(j);
+            if let Some(t) = axis.and_then(|a| travel.get_mut(a.index())) {
+                *t = (t.0.max(spec.limits.min), t.1.min(spec.limits.max));
+            }
+            match axis.and_then(|a| limits[a.index()].as_mut()) {
                 Some(l) => {
                     l.max_velocity = l.max_velocity.min(spec.limits.max_velocity);
                     l.max_acceleration = l.max_acceleration.min(spec.limits.max_acceleration);
@@ -598,6 +627,7 @@ impl<'k> Planner<'k> {
             config,
             limits,
             sample_joints,
+            travel,
             mode: config.mode,
             feed_word: 0.0,
             per_revolution: false,
@@ -1103,6 +1133,7 @@ impl<'k> Planner<'k> {
     /// curvatures `k0`, `k1`, if it stays within `b`'s tolerance of the
     /// programmed lines (checked on 31 points, against 97 % of it).
     fn blend_within(
+        &self,
         a: &Pending,
         b: &Pending,
         legs: (f64, f64),
@@ -1132,8 +1163,9 @@ impl<'k> Planner<'k> {
         // where |B′| all but vanishes and arc length stops being usable.
         let min_speed = 0.3 * scale;
         let proven = hull_bounds(&control, la, lb, tolerance, min_speed);
-        (proven.all() || sampled_within(&control, &[*la, *lb], tolerance, min_speed, &proven))
-            .then_some(control)
+        let near =
+            proven.all() || sampled_within(&control, &[*la, *lb], tolerance, min_speed, &proven);
+        (near && self.blend_in_reach(&control)).then_some(control)
     }
 
     /// Emit what the waiting moves decide. With `last`, everything goes and
@@ -1230,6 +1262,33 @@ impl<'k> Planner<'k> {
         self.emit(blend, f64::INFINITY);
     }
 
+    /// Whether the blend with control points `q` stays where the machine
+    /// can go. The programmed moves are checked (`check_shape`), but a
+    /// blend leaves them by up to the tolerance, and at a corner next to
+    /// the edge of the travel or of the reach that can be outside.
+    ///
+    /// With every joint an axis the travel is a box, so it is proven on the
+    /// control points' hull, halving the curve where a hull sticks out
+    /// ([`hull_in_box`]). Otherwise the reach can be any shape, and the
+    /// blend is sampled, as `check_shape` samples a move: at least 8
+    /// points and one every 0.25 mm of its control polygon.
+    fn blend_in_reach(&self, q: &[Vec9; 6]) -> bool {
+        let points: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
+        if !self.sample_joints {
+            return hull_in_box(&points, &self.travel, SUBDIVISIONS + 2);
+        }
+        let polygon: f64 = (0..5)
+            .map(|k| norm(&std::array::from_fn(|i| q[k + 1][i] - q[k][i])))
+            .sum();
+        let n = ((polygon / 0.25).ceil() as usize).clamp(8, 64);
+        let poly = Poly::new(q);
+        (1..n).all(|k| {
+            let mut p = q[0];
+            p[..3].copy_from_slice(&poly.point(k as f64 / n as f64));
+            self.kins.check_pose(&Position::from_array(p)).is_ok()
+        })
+    }
+
     /// The blend at the corner between the first two waiting moves when
     /// either is an arc (lines and arcs that move X Y Z only, in G64 with
     /// a finite tolerance, turning more than [`KINK`] and at most
@@ -1302,7 +1361,10 @@ impl<'k> Planner<'k> {
             near.extend(near_b);
             let limit = tolerance - sag_a.max(sag_b);
             let nothing = Proven::default();
-            if limit > 0.0 && sampled_within(&control, &near, limit, 0.3 * scale, &nothing) {
+            if limit > 0.0
+                && sampled_within(&control, &near, limit, 0.3 * scale, &nothing)
+                && self.blend_in_reach(&control)
+            {
                 return Some((legs, control));
             }
         }
@@ -1334,8 +1396,11 @@ impl<'k> Planner<'k> {
                 &b.programmed().unwrap(),
                 &c.programmed().unwrap(),
             );
-            if let Some(bl) = Self::blend_within(a, b, legs, &k0, &candidate) {
-                if Self::blend_within(b, c, legs_bc, &candidate, &zero).is_some() {
+            if let Some(bl) = self.blend_within(a, b, legs, &k0, &candidate) {
+                if self
+                    .blend_within(b, c, legs_bc, &candidate, &zero)
+                    .is_some()
+                {
                     return Some((legs, bl, candidate));
                 }
             }
@@ -1343,14 +1408,14 @@ impl<'k> Planner<'k> {
         // Zero curvature at b's end. With k0 fixed the legs are too (a's
         // midpoint is shared); otherwise shrink them until the blend is
         // within tolerance.
-        let mut found = Self::blend_within(a, b, legs, &k0, &zero);
+        let mut found = self.blend_within(a, b, legs, &k0, &zero);
         if !a_consumed {
             for _ in 0..8 {
                 if found.is_some() {
                     break;
                 }
                 legs = (legs.0 * 0.7, legs.1 * 0.7);
-                found = Self::blend_within(a, b, legs, &zero, &zero);
+                found = self.blend_within(a, b, legs, &zero, &zero);
             }
         }
         found.map(|control| (legs, control, zero))
@@ -1745,17 +1810,128 @@ mod tests {
             moves < steps / 3,
             "merging happened: {moves} segments for {steps} moves"
         );
+        assert_clear_of_column(&segs, "Q0.05");
+    }
+
+    /// Every planned segment, sampled 257 times, stays out of `Column`'s
+    /// hole of radius 10.
+    fn assert_clear_of_column(segs: &[Segment], what: &str) {
         for seg in segs.iter().filter(|s| s.is_motion()) {
-            for k in 0..=64 {
-                let p = seg.position_at(seg.length * k as f64 / 64.0);
+            for k in 0..=256 {
+                let p = seg.position_at(seg.length * k as f64 / 256.0);
                 let from_axis = (p.x - 50.0).hypot(p.y);
                 assert!(
                     from_axis >= 10.0 - 1e-9,
-                    "line {} passes {from_axis:.4} mm from the column's axis",
+                    "{what}: line {} passes {from_axis:.5} mm from the column's axis",
                     seg.line
                 );
             }
         }
+    }
+
+    /// Blends cut a corner by up to the tolerance, and only the programmed
+    /// moves are checked against the machine's reach: at a corner 0.002 mm
+    /// from the column, with the column on the side the blend cuts toward,
+    /// the blend must come out smaller, not pass through the column.
+    #[test]
+    fn blends_never_cut_into_what_the_machine_cannot_reach() {
+        let kins = Column {
+            xyz: xyz(100.0, 1000.0, 50_000.0),
+            hole: 10.0,
+        };
+        // The corner at (vx, 0) turns by 0.5°; the line in stays 10.0016
+        // mm from the column's axis, the line out likewise and the arc out
+        // 10.002 mm, all round the column.
+        let vx = 50.0 - 10.002;
+        let (sin, cos) = 0.5f64.to_radians().sin_cos();
+        let into = format!(
+            "G21 G90 G64 P0.01\nG0 X{:.6} Y{:.6}\nG1 F1000 X{vx} Y0\n",
+            vx + 30.0 * sin,
+            -30.0 * cos
+        );
+        let out = [
+            format!("X{:.6} Y{:.6}", vx + 30.0 * sin, 30.0 * cos),
+            "G2 X50 Y10.002 I10.002 J0".to_string(),
+        ];
+        for out in out {
+            let text = format!("{into}{out}\nM2\n");
+            let segs = plan(&kins, PlannerConfig::default(), &text);
+            let at_corner = segs
+                .iter()
+                .filter(|s| {
+                    matches!(s.shape, Shape::Blend(_))
+                        && (s.start().x - vx).hypot(s.start().y) < 5.0
+                })
+                .count();
+            assert_eq!(at_corner, 1, "{out}: the corner is blended, closer in");
+            assert_clear_of_column(&segs, &out);
+        }
+    }
+
+    /// On a machine whose joints are its axes the travel is a box. Lines
+    /// that run into quarter arcs starting on the edge of the travel (at
+    /// X1000, heading +Y): the blends' control polygons stick out past the
+    /// edge there, the blends do not, and every corner still blends.
+    #[test]
+    fn corners_on_the_edge_of_the_travel_still_blend_inside_it() {
+        let k = xyz(100.0, 1000.0, 50_000.0);
+        let mut text = "G21 G90 G64 P0.05\nG0 X990 Y0\nG1 F3000\n".to_string();
+        for n in 0..5 {
+            let y = 20.0 * n as f64;
+            text += &format!("X1000 Y{}\nG3 X990 Y{} I-10 J0\nG1\n", y + 10.0, y + 20.0);
+        }
+        text += "M2\n";
+        let segs = plan(&k, PlannerConfig::default(), &text);
+        let blends = segs
+            .iter()
+            .filter(|s| matches!(s.shape, Shape::Blend(_)))
+            .count();
+        assert_eq!(blends, 10, "one blend per corner, the rapid's included");
+        for seg in segs.iter().filter(|s| s.is_motion()) {
+            for k in 0..=256 {
+                let p = seg.position_at(seg.length * k as f64 / 256.0);
+                assert!(p.x <= 1000.0 + 1e-9, "line {} reaches X{}", seg.line, p.x);
+            }
+        }
+    }
+
+    /// `hull_in_box` is a proof: on random quintics near the edge of a box
+    /// it never accepts one that a dense sample finds outside, and it
+    /// accepts most of those that stay clear of the edge.
+    #[test]
+    fn hull_in_box_never_accepts_a_curve_that_leaves_the_box() {
+        let travel = [(0.0, 10.0), (0.0, 10.0), (-5.0, 5.0)];
+        let mut rand = crate::testkit::uniform(0x5eed_b0c5);
+        let (mut clear, mut proven) = (0, 0);
+        for _ in 0..4000 {
+            // Control points around the X = 10 face, up to 0.05 mm past it.
+            let q: [Vec9; 6] = std::array::from_fn(|_| {
+                let mut p = [0.0; 9];
+                p[0] = 9.9 + 0.15 * rand();
+                p[1] = 4.0 + 2.0 * rand();
+                p[2] = -1.0 + 2.0 * rand();
+                p
+            });
+            let points: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
+            let poly = Poly::new(&q);
+            let most = (0..=2000)
+                .map(|k| poly.point(k as f64 / 2000.0)[0])
+                .fold(f64::NEG_INFINITY, f64::max);
+            let accepted = hull_in_box(&points, &travel, SUBDIVISIONS + 2);
+            assert!(
+                !accepted || most <= 10.0 + LIMIT_SLACK,
+                "accepted a curve reaching X{most}"
+            );
+            if most < 10.0 - 1e-4 {
+                clear += 1;
+                proven += accepted as usize;
+            }
+        }
+        assert!(clear > 100, "{clear} clear curves");
+        assert!(
+            proven as f64 >= 0.95 * clear as f64,
+            "proved {proven} of {clear} clear curves"
+        );
     }
 
     #[test]
