@@ -119,9 +119,16 @@ pub fn corner_spread(bend: f64) -> f64 {
 /// A G2-continuous corner blend: a quintic Bézier whose first three and
 /// last three control points lie on the incoming and outgoing lines, so its
 /// tangent matches both lines and its curvature is zero at both ends.
+///
+/// Only X Y Z move along a blend (the planner blends only moves of X Y Z),
+/// so it keeps X Y Z control points and where the other axes stand: half
+/// the size of nine-axis control points, in a segment that queues copy.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Blend {
-    pub control: [Vec9; 6],
+    /// X Y Z control points, mm.
+    pub control: [[f64; 3]; 6],
+    /// A B C U V W, which stay where they are along the blend.
+    pub rest: [f64; 6],
     /// Arc length from the start at parameter u = i/TABLE, i = 0..=TABLE.
     pub table: [f64; TABLE + 1],
 }
@@ -498,13 +505,45 @@ impl Blend {
                 out.curvature_rate[i] *= 1.25;
             }
         } else {
+            // `third` over arrays of parameters, as above; the reciprocal
+            // of |B′| is zero where B′ vanishes, which zeroes the rate.
             const F: usize = 2 * SAMPLES + 1;
-            let mut rate = [[0.0; F]; 3];
+            const UF: [f64; F] = {
+                let mut u = [0.0; F];
+                let mut k = 0;
+                while k < F {
+                    u[k] = k as f64 / (2 * SAMPLES) as f64;
+                    k += 1;
+                }
+                u
+            };
+            let mut e1 = [[0.0; F]; 3];
+            let mut e2 = [[0.0; F]; 3];
+            let mut e3 = [[0.0; F]; 3];
+            for i in 0..3 {
+                let (c1, c2) = (&poly.d1[i], &poly.d2[i]);
+                for k in 0..F {
+                    let u = UF[k];
+                    e1[i][k] = (((c1[4] * u + c1[3]) * u + c1[2]) * u + c1[1]) * u + c1[0];
+                    e2[i][k] = ((c2[3] * u + c2[2]) * u + c2[1]) * u + c2[0];
+                    e3[i][k] = c2[1] + u * (2.0 * c2[2] + u * 3.0 * c2[3]);
+                }
+            }
+            let mut w1 = [0.0; F];
+            let mut w2 = [0.0; F];
+            let mut w3 = [0.0; F];
             for k in 0..F {
-                let u = k as f64 / (2 * SAMPLES) as f64;
-                let t = third(poly.d1(u), poly.d2(u), poly.d3(u));
-                for i in 0..3 {
-                    rate[i][k] = t[i];
+                let (d1, d2, d3) = (
+                    [e1[0][k], e1[1][k], e1[2][k]],
+                    [e2[0][k], e2[1][k], e2[2][k]],
+                    [e3[0][k], e3[1][k], e3[2][k]],
+                );
+                (w1[k], w2[k], w3[k]) = third_weights(d1, d2, d3);
+            }
+            let mut rate = [[0.0; F]; 3];
+            for i in 0..3 {
+                for k in 0..F {
+                    rate[i][k] = e3[i][k] * w3[k] + e2[i][k] * w2[k] + e1[i][k] * w1[k];
                 }
             }
             for i in 0..3 {
@@ -560,10 +599,33 @@ impl Blend {
     /// [`point_at_parameter`](Self::point_at_parameter), e.g. to test a
     /// candidate shape before keeping it.
     pub fn untabled(control: [Vec9; 6]) -> Blend {
+        let mut rest = [0.0; 6];
+        rest.copy_from_slice(&control[0][3..]);
         Blend {
-            control,
+            control: control.map(|q| [q[0], q[1], q[2]]),
+            rest,
             table: [0.0; TABLE + 1],
         }
+    }
+
+    /// The point with X Y Z `xyz` and the other axes where the blend
+    /// holds them.
+    fn with_rest(&self, xyz: [f64; 3]) -> Vec9 {
+        let mut p = [0.0; 9];
+        p[..3].copy_from_slice(&xyz);
+        p[3..].copy_from_slice(&self.rest);
+        p
+    }
+
+    /// Control point `k` (0..6) with every axis.
+    pub fn control_point(&self, k: usize) -> Vec9 {
+        self.with_rest(self.control[k])
+    }
+
+    /// All six control points with every axis, as [`sampled`](Self::sampled)
+    /// takes them.
+    pub fn control_points(&self) -> [Vec9; 6] {
+        std::array::from_fn(|k| self.control_point(k))
     }
 
     /// |d B / du| (the hodograph's length), cheaper than computing all three derivatives.
@@ -660,10 +722,9 @@ impl Blend {
     fn derivatives(&self, u: f64) -> (Vec9, Vec9, Vec9) {
         let poly = Poly::new(&self.control);
         let (p3, d13, d23) = (poly.point(u), poly.d1(u), poly.d2(u));
-        let mut p = self.control[0];
+        let p = self.with_rest(p3);
         let mut d1 = [0.0; 9];
         let mut d2 = [0.0; 9];
-        p[..3].copy_from_slice(&p3);
         d1[..3].copy_from_slice(&d13);
         d2[..3].copy_from_slice(&d23);
         (p, d1, d2)
@@ -671,9 +732,7 @@ impl Blend {
 
     /// Point at Bézier parameter `u` (X Y Z vary, as in the derivatives).
     pub fn point_at_parameter(&self, u: f64) -> Vec9 {
-        let mut p = self.control[0];
-        p[..3].copy_from_slice(&Poly::new(&self.control).point(u));
-        p
+        self.with_rest(Poly::new(&self.control).point(u))
     }
 
     /// Total arc length.
@@ -714,26 +773,35 @@ impl Blend {
 /// d³p/ds³ from the first three derivatives in the Bézier parameter (see
 /// [`Blend::third_at_parameter`]); zero where B′ vanishes.
 fn third(d1: [f64; 3], d2: [f64; 3], d3: [f64; 3]) -> [f64; 3] {
+    let (w1, w2, w3) = third_weights(d1, d2, d3);
+    std::array::from_fn(|i| d3[i] * w3 + d2[i] * w2 + d1[i] * w1)
+}
+
+/// The weights (w1, w2, w3) with d³p/ds³ = w1·B′ + w2·B″ + w3·B‴, from
+/// the derivatives in the Bézier parameter; all zero where B′ vanishes.
+/// Written without branches so that loops over parameters vectorise.
+#[inline(always)]
+fn third_weights(d1: [f64; 3], d2: [f64; 3], d3: [f64; 3]) -> (f64, f64, f64) {
     let s2 = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2];
-    if s2 == 0.0 {
-        return [0.0; 3];
-    }
     let sigma = s2.sqrt();
-    let ds = (d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]) / sigma;
+    let inv = if s2 > 0.0 { 1.0 / sigma } else { 0.0 };
+    // σ′ = B′·B″/σ and σ″ = (|B″|² + B′·B‴)/σ − σ′²/σ.
+    let ds = (d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]) * inv;
     let dds = (d2[0] * d2[0]
         + d2[1] * d2[1]
         + d2[2] * d2[2]
         + d1[0] * d3[0]
         + d1[1] * d3[1]
         + d1[2] * d3[2])
-        / sigma
-        - ds * ds / sigma;
-    let s3 = s2 * sigma;
-    let s4 = s2 * s2;
-    let s5 = s4 * sigma;
-    std::array::from_fn(|i| {
-        d3[i] / s3 - 3.0 * ds * d2[i] / s4 + (3.0 * ds * ds - sigma * dds) * d1[i] / s5
-    })
+        * inv
+        - ds * ds * inv;
+    let inv3 = inv * inv * inv;
+    let inv4 = inv3 * inv;
+    (
+        (3.0 * ds * ds - sigma * dds) * inv4 * inv,
+        -3.0 * ds * inv4,
+        inv3,
+    )
 }
 
 /// Five-point Gauss–Legendre nodes on -1..1, and their weights.
@@ -782,7 +850,9 @@ pub(crate) struct Poly {
 }
 
 impl Poly {
-    pub(crate) fn new(q: &[Vec9; 6]) -> Poly {
+    /// The quintic with control points `q`, X Y Z (the first three
+    /// coordinates of each).
+    pub(crate) fn new<const N: usize>(q: &[[f64; N]; 6]) -> Poly {
         // Bernstein to power basis: c_k = C(5, k)·Δ^k Q_0.
         const BINOMIAL: [f64; 6] = [1.0, 5.0, 10.0, 10.0, 5.0, 1.0];
         let mut poly = Poly {
@@ -868,7 +938,7 @@ impl Shape {
         match self {
             Shape::Line(l) => l.start,
             Shape::Arc(a) => self.frame_arc(a, 0.0).point,
-            Shape::Blend(b) => b.control[0],
+            Shape::Blend(b) => b.control_point(0),
         }
     }
 
@@ -877,7 +947,7 @@ impl Shape {
         match self {
             Shape::Line(l) => l.end,
             Shape::Arc(a) => self.frame_arc(a, a.length()).point,
-            Shape::Blend(b) => b.control[5],
+            Shape::Blend(b) => b.control_point(5),
         }
     }
 
@@ -1253,7 +1323,7 @@ mod tests {
             }
             let leg = 10f64.powf(-3.0 + 4.0 * rnd());
             let b = Blend::corner(&v(50.0, 50.0, -20.0), &u_in, &u_out, leg);
-            let bound = Blend::sampled(b.control).1.curvature_rate;
+            let bound = Blend::sampled(b.control_points()).1.curvature_rate;
             let mut exact = [0.0f64; 3];
             for k in 0..=20_000 {
                 let t = b.third_at_parameter(k as f64 / 20_000.0);

@@ -327,13 +327,14 @@ impl Pending {
     /// The programmed path within `reach` mm of the move's end
     /// (`from_end`) or start, as lines, and how far they may stray from
     /// it: the line itself, or chords of the arc within `sag`.
-    fn near(&self, reach: f64, from_end: bool, sag: f64) -> (Vec<Line>, f64) {
+    fn near(&self, reach: f64, from_end: bool, sag: f64) -> (Vec<Near>, f64) {
         match &self.source {
-            AsProgrammed::Line(p) => (vec![p.line], 0.0),
+            AsProgrammed::Line(p) => (vec![Near::new(&p.line)], 0.0),
             AsProgrammed::Arc(arc) => {
                 let f = (reach / arc.length()).min(1.0);
                 let (f0, f1) = if from_end { (1.0 - f, 1.0) } else { (0.0, f) };
-                arc.chords(f0, f1, sag, 256)
+                let (chords, sag) = arc.chords(f0, f1, sag, 256);
+                (chords.iter().map(Near::new).collect(), sag)
             }
         }
     }
@@ -348,6 +349,8 @@ struct Programmed {
     length: f64,
     /// Only X Y Z move (blends join such lines only).
     xyz_only: bool,
+    /// The line made ready for the blend proofs.
+    near: Near,
 }
 
 impl Programmed {
@@ -357,6 +360,7 @@ impl Programmed {
             direction: line.direction(),
             length: line.length(),
             xyz_only: (3..9).all(|i| line.start[i] == line.end[i]),
+            near: Near::new(&line),
         }
     }
 }
@@ -443,19 +447,41 @@ fn halves(q: &[[f64; 3]; 6]) -> ([[f64; 3]; 6], [[f64; 3]; 6]) {
     (left, right)
 }
 
-/// Whether every control point of `points` is within √`limit2` of the
-/// segment `l`: then, by the convex hull property and the convexity of the
-/// distance to a segment, so is the whole curve piece they control.
-fn hull_within(points: &[[f64; 3]; 6], l: &Line, limit2: f64) -> bool {
-    let d: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
-    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    let inv = if dd > 0.0 { 1.0 / dd } else { 0.0 };
-    points.iter().all(|p| {
-        let w: [f64; 3] = std::array::from_fn(|i| p[i] - l.start[i]);
-        let t = ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) * inv).clamp(0.0, 1.0);
+/// A programmed segment (X Y Z) made ready for the many distance tests of
+/// the blend proofs: its start, its span and 1/|span|².
+#[derive(Clone, Copy, Debug)]
+struct Near {
+    start: [f64; 3],
+    span: [f64; 3],
+    inv: f64,
+}
+
+impl Near {
+    fn new(l: &Line) -> Near {
+        let span: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
+        let dd = span[0] * span[0] + span[1] * span[1] + span[2] * span[2];
+        Near {
+            start: [l.start[0], l.start[1], l.start[2]],
+            span,
+            inv: if dd > 0.0 { 1.0 / dd } else { 0.0 },
+        }
+    }
+
+    /// Squared distance from `p` to the segment.
+    fn distance2(&self, p: &[f64; 3]) -> f64 {
+        let (d, w): (&[f64; 3], [f64; 3]) =
+            (&self.span, std::array::from_fn(|i| p[i] - self.start[i]));
+        let t = ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) * self.inv).clamp(0.0, 1.0);
         let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
-        e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= limit2
-    })
+        e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    }
+
+    /// Whether every control point of `points` is within √`limit2` of the
+    /// segment: then, by the convex hull property and the convexity of the
+    /// distance to a segment, so is the whole curve piece they control.
+    fn hull_within(&self, points: &[[f64; 3]; 6], limit2: f64) -> bool {
+        points.iter().all(|p| self.distance2(p) <= limit2)
+    }
 }
 
 /// Halvings [`piece_near`] may make of a quarter before it gives up:
@@ -468,13 +494,12 @@ const SUBDIVISIONS: u32 = 6;
 /// or cannot be proven at the last level, fails. A proof, not a sample:
 /// sampling missed peaks narrower than the samples' spacing
 /// (stellabee1.ngc measured 0.0103 mm under P0.01).
-fn piece_near(points: &[[f64; 3]; 6], lines: &[Line], limit2: f64, depth: u32) -> bool {
-    if lines.iter().any(|l| hull_within(points, l, limit2)) {
+fn piece_near(points: &[[f64; 3]; 6], lines: &[Near], limit2: f64, depth: u32) -> bool {
+    if lines.iter().any(|l| l.hull_within(points, limit2)) {
         return true;
     }
     // The piece's first control point is on the curve.
-    let start = [points[0]; 6];
-    if depth == 0 || !lines.iter().any(|l| hull_within(&start, l, limit2)) {
+    if depth == 0 || !lines.iter().any(|l| l.distance2(&points[0]) <= limit2) {
         return false;
     }
     let (left, right) = halves(points);
@@ -505,7 +530,7 @@ fn hull_in_box(points: &[[f64; 3]; 6], travel: &[(f64, f64); 3], depth: u32) -> 
 /// guarantees is not computed again.
 fn sampled_within(
     q: &[Vec9; 6],
-    lines: &[Line],
+    lines: &[Near],
     tolerance: f64,
     min_speed: f64,
     proven: &Proven,
@@ -559,13 +584,13 @@ impl Proven {
 /// its component along any unit vector e is at least the least of theirs,
 /// and |B′| ≥ B′·e. A margin of 1e-9 covers rounding (and squared distances
 /// where the sampled test takes roots).
-fn hull_bounds(q: &[Vec9; 6], la: &Line, lb: &Line, tolerance: f64, min_speed: f64) -> Proven {
+fn hull_bounds(q: &[Vec9; 6], la: &Near, lb: &Near, tolerance: f64, min_speed: f64) -> Proven {
     let limit = tolerance * (1.0 - 1e-9);
     let limit2 = limit * limit;
-    let within = |points: &[[f64; 3]; 6], l: &Line| hull_within(points, l, limit2);
+    let within = |points: &[[f64; 3]; 6], l: &Near| l.hull_within(points, limit2);
     let points: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
     let (left, right) = halves(&points);
-    let quarters = |half: &[[f64; 3]; 6], near: &Line| {
+    let quarters = |half: &[[f64; 3]; 6], near: &Near| {
         if within(half, near) {
             return [true, true];
         }
@@ -1144,7 +1169,7 @@ impl<'k> Planner<'k> {
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let (la, lb) = (&pa.line, &pb.line);
+        let la = &pa.line;
         let (u1, u2) = (&pa.direction, &pb.direction);
         let corner = la.end;
         let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
@@ -1162,9 +1187,10 @@ impl<'k> Planner<'k> {
         // everywhere; large end curvatures can fold it into a near-cusp,
         // where |B′| all but vanishes and arc length stops being usable.
         let min_speed = 0.3 * scale;
-        let proven = hull_bounds(&control, la, lb, tolerance, min_speed);
+        let (na, nb) = (pa.near, pb.near);
+        let proven = hull_bounds(&control, &na, &nb, tolerance, min_speed);
         let near =
-            proven.all() || sampled_within(&control, &[*la, *lb], tolerance, min_speed, &proven);
+            proven.all() || sampled_within(&control, &[na, nb], tolerance, min_speed, &proven);
         (near && self.blend_in_reach(&control)).then_some(control)
     }
 
@@ -1589,7 +1615,7 @@ impl<'k> Planner<'k> {
                 let extremes = match extremes {
                     Some(extremes) => extremes,
                     None => {
-                        owned = Blend::sampled(b.control).1;
+                        owned = Blend::sampled(b.control_points()).1;
                         &owned
                     }
                 };
@@ -1970,6 +1996,7 @@ mod tests {
             );
             let tolerance = 0.001 + rand() * 0.05;
             let min_speed = 0.3 * (legs.0 + legs.1);
+            let (la, lb) = (Near::new(&la), Near::new(&lb));
             let proven = hull_bounds(&control, &la, &lb, tolerance, min_speed);
             let sure = proven.all();
             let nothing = Proven::default();
