@@ -242,8 +242,6 @@ struct Pending {
     segment: Segment,
     /// The move as programmed, before blends trimmed it.
     source: AsProgrammed,
-    /// The line as trimmed so far.
-    line: Option<Line>,
     /// Path mode in force when the move was programmed.
     mode: PathMode,
     /// Length of the start taken by the blend before it.
@@ -261,17 +259,21 @@ enum AsProgrammed {
 }
 
 impl Pending {
+    fn is_line(&self) -> bool {
+        matches!(self.source, AsProgrammed::Line(_))
+    }
+
     /// The line as programmed, when it is one.
-    fn programmed(&self) -> Option<Programmed> {
-        match self.source {
+    fn programmed(&self) -> Option<&Programmed> {
+        match &self.source {
             AsProgrammed::Line(p) => Some(p),
             AsProgrammed::Arc(_) => None,
         }
     }
 
     /// The arc as programmed, when it is one.
-    fn arc(&self) -> Option<Arc> {
-        match self.source {
+    fn arc(&self) -> Option<&Arc> {
+        match &self.source {
             AsProgrammed::Arc(arc) => Some(arc),
             AsProgrammed::Line(_) => None,
         }
@@ -313,7 +315,7 @@ impl Pending {
         };
         // A spiral's frame is a hair off unit length and off square; the
         // blend takes the unit tangent and the curvature across it.
-        let frame = Shape::Arc(arc).frame(f * full);
+        let frame = Shape::Arc(*arc).frame(f * full);
         let n = norm(&frame.tangent);
         let t: Vec9 = std::array::from_fn(|i| frame.tangent[i] / n);
         let along: f64 = (0..9).map(|i| frame.curvature[i] * t[i]).sum();
@@ -1075,7 +1077,6 @@ impl<'k> Planner<'k> {
         self.pending.push_back(Pending {
             segment,
             source: AsProgrammed::Line(Programmed::new(line)),
-            line: Some(line),
             mode: self.mode,
             start_leg: 0.0,
             mid_curvature: [0.0; 9],
@@ -1097,7 +1098,6 @@ impl<'k> Planner<'k> {
         self.pending.push_back(Pending {
             segment,
             source: AsProgrammed::Arc(arc),
-            line: None,
             mode: self.mode,
             start_leg: 0.0,
             mid_curvature: [0.0; 9],
@@ -1208,7 +1208,7 @@ impl<'k> Planner<'k> {
                 }
                 return;
             }
-            let both_lines = self.pending[0].line.is_some() && self.pending[1].line.is_some();
+            let both_lines = self.pending[0].is_line() && self.pending[1].is_line();
             if both_lines && n < 3 && !last {
                 return; // the midpoint of pending[1] depends on the next move
             }
@@ -1238,9 +1238,8 @@ impl<'k> Planner<'k> {
         // copies of them showed in profiles.
         let a = &mut self.pending[0];
         let full = a.full_length();
-        if let (Some(p), Some(mut trimmed)) = (a.programmed(), a.line) {
+        if let (AsProgrammed::Line(p), Shape::Line(trimmed)) = (&a.source, &mut a.segment.shape) {
             trimmed.end = std::array::from_fn(|i| p.line.end[i] - legs.0 * p.direction[i]);
-            a.segment.shape = Shape::Line(trimmed);
         } else if let Some(arc) = a.arc() {
             let f0 = a.start_leg / full;
             a.segment.shape = Shape::Arc(arc.part(f0, (1.0 - legs.0 / full).max(f0)));
@@ -1257,10 +1256,8 @@ impl<'k> Planner<'k> {
         }
         let b = self.pending.front_mut().expect("b waits");
         let full = b.full_length();
-        if let (Some(p), Some(mut b_line)) = (b.programmed(), b.line) {
-            b_line.start = std::array::from_fn(|i| p.line.start[i] + legs.1 * p.direction[i]);
-            b.line = Some(b_line);
-            b.segment.shape = Shape::Line(b_line);
+        if let (AsProgrammed::Line(p), Shape::Line(trimmed)) = (&b.source, &mut b.segment.shape) {
+            trimmed.start = std::array::from_fn(|i| p.line.start[i] + legs.1 * p.direction[i]);
         } else if let Some(arc) = b.arc() {
             b.segment.shape = Shape::Arc(arc.part(legs.1 / full, 1.0));
         }
@@ -1408,7 +1405,7 @@ impl<'k> Planner<'k> {
         } else {
             return None;
         };
-        let c = self.pending.get(2).filter(|c| c.line.is_some());
+        let c = self.pending.get(2).filter(|c| c.is_line());
         let legs_bc = c.and_then(|c| self.legs(b, c));
         let half = |p: &Pending| p.full_length() / 2.0;
         // A line is consumed when blends take both its halves; the
@@ -1418,9 +1415,9 @@ impl<'k> Planner<'k> {
         let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
             let candidate = Self::mid_curvature(
-                &a.programmed().unwrap(),
-                &b.programmed().unwrap(),
-                &c.programmed().unwrap(),
+                a.programmed().unwrap(),
+                b.programmed().unwrap(),
+                c.programmed().unwrap(),
             );
             if let Some(bl) = self.blend_within(a, b, legs, &k0, &candidate) {
                 if self
@@ -1457,7 +1454,7 @@ impl<'k> Planner<'k> {
         let end = a.segment.shape.frame(a.segment.length);
         let start = b.segment.shape.frame(0.0);
         let bend = norm(&std::array::from_fn(|i| start.tangent[i] - end.tangent[i]));
-        let limit = if a.line.is_some() && b.line.is_some() {
+        let limit = if a.is_line() && b.is_line() {
             STRAIGHT
         } else {
             KINK
