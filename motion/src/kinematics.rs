@@ -142,7 +142,10 @@ pub trait Kinematics: Send + Sync {
     /// `Some(axis)` when joint `joint` moves exactly with one axis (joint
     /// position = axis position), as in trivial kinematics. The planner then
     /// applies that joint's limits to the axis directly instead of sampling
-    /// the path through [`inverse`](Kinematics::inverse).
+    /// the path through [`inverse`](Kinematics::inverse). When every joint
+    /// does, it takes the reach to be the box of axis travel and joint
+    /// strokes (corner blends are proven inside it), so such a machine's
+    /// [`check_pose`](Kinematics::check_pose) must not refuse anything else.
     fn joint_axis(&self, _joint: usize) -> Option<Axis> {
         None
     }
