@@ -242,9 +242,6 @@ pub struct Profile {
     pub s: Vec<f64>,
     /// Optimal path speed at each node, mm/s.
     pub v: Vec<f64>,
-    /// Time at which the optimal profile reaches each node, s, with every
-    /// dwell counted at the start.
-    pub t: Vec<f64>,
 }
 
 /// Collects planned segments and computes the time-optimal profile along
@@ -525,8 +522,9 @@ impl<'k> TimeBound<'k> {
         xa.min(y * y)
     }
 
-    /// What bounds s⃛ from above at `frame`, given p‴·t by `third_t`.
-    fn tangential_at(&self, frame: &Frame, third_t: f64) -> Tangential {
+    /// What bounds s⃛ from above at `frame`, given p‴·t by `third_t`; on
+    /// a line (`line`) p‴ vanishes, and axis i's jerk is t_i·s⃛ alone.
+    fn tangential_at(&self, frame: &Frame, third_t: f64, line: bool) -> Tangential {
         if !self.config.jerk {
             return Tangential::FREE;
         }
@@ -536,8 +534,9 @@ impl<'k> TimeBound<'k> {
             return Tangential::FREE;
         }
         let moving = (0..9).filter(|&i| t[i] != 0.0);
-        let base = if third_t == 0.0 && k.iter().all(|&c| c == 0.0) {
-            // Straight: axis i's jerk is t_i·s⃛ alone.
+        // Elsewhere — a blend's end has no curvature but a p‴ across the
+        // tangent — the axis jerks are projected on the tangent.
+        let base = if line {
             moving
                 .map(|i| self.axis_jerk[i] / t[i].abs())
                 .fold(f64::INFINITY, f64::min)
@@ -564,7 +563,7 @@ impl<'k> TimeBound<'k> {
         ds: f64,
         line: bool,
     ) {
-        let tangential = self.tangential_at(frame, third_t);
+        let tangential = self.tangential_at(frame, third_t, line);
         self.tangential.push(tangential);
         let start = self.geometry.len();
         let mut g = std::mem::take(&mut self.geometry);
@@ -743,15 +742,13 @@ impl<'k> TimeBound<'k> {
         }
         let mut time = self.dwell;
         let mut s = Vec::with_capacity(n);
-        let mut t = Vec::with_capacity(n);
         let mut at = 0.0;
         for k in 0..n {
             s.push(at);
-            t.push(time);
             at += nodes[k].ds;
             time += step[k];
         }
-        Profile { time, s, v, t }
+        Profile { time, s, v }
     }
 
     /// One forward and one backward pass over `x` (lowering it only):

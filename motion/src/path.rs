@@ -24,18 +24,48 @@ pub fn norm(v: &Vec9) -> f64 {
 /// X Y Z distance from `p` to the segment `a`–`b` (the other axes do not
 /// count: path tolerances are in the tool's space).
 pub fn distance_to_segment(p: &Vec9, a: &Vec9, b: &Vec9) -> f64 {
-    let d: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
-    let w: [f64; 3] = std::array::from_fn(|i| p[i] - a[i]);
-    let dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-    let t = if dd > 0.0 {
-        ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) / dd).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (0..3)
-        .map(|i| (w[i] - t * d[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
+    Near::between(a, b).distance2(&[p[0], p[1], p[2]]).sqrt()
+}
+
+/// A segment (X Y Z) made ready for many distance tests, as the blend
+/// proofs make: its start, its span and 1/|span|².
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Near {
+    start: [f64; 3],
+    span: [f64; 3],
+    inv: f64,
+}
+
+impl Near {
+    pub(crate) fn new(l: &Line) -> Near {
+        Near::between(&l.start, &l.end)
+    }
+
+    fn between(a: &Vec9, b: &Vec9) -> Near {
+        let span: [f64; 3] = std::array::from_fn(|i| b[i] - a[i]);
+        let dd = span[0] * span[0] + span[1] * span[1] + span[2] * span[2];
+        Near {
+            start: [a[0], a[1], a[2]],
+            span,
+            inv: if dd > 0.0 { 1.0 / dd } else { 0.0 },
+        }
+    }
+
+    /// Squared distance from `p` to the segment.
+    pub(crate) fn distance2(&self, p: &[f64; 3]) -> f64 {
+        let (d, w): (&[f64; 3], [f64; 3]) =
+            (&self.span, std::array::from_fn(|i| p[i] - self.start[i]));
+        let t = ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) * self.inv).clamp(0.0, 1.0);
+        let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
+        e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    }
+
+    /// Whether every control point of `points` is within √`limit2` of the
+    /// segment: then, by the convex hull property and the convexity of the
+    /// distance to a segment, so is the whole curve piece they control.
+    pub(crate) fn hull_within(&self, points: &[[f64; 3]; 6], limit2: f64) -> bool {
+        points.iter().all(|p| self.distance2(p) <= limit2)
+    }
 }
 
 /// A straight line.
@@ -116,9 +146,10 @@ pub fn corner_spread(bend: f64) -> f64 {
     s0 + (s1 - s0) * (degrees - a0) / (a1 - a0)
 }
 
-/// A G2-continuous corner blend: a quintic Bézier whose first three and
-/// last three control points lie on the incoming and outgoing lines, so its
-/// tangent matches both lines and its curvature is zero at both ends.
+/// A G2-continuous corner blend: a quintic Bézier whose ends take the
+/// point, tangent and curvature of what it joins ([`Blend::hermite`]);
+/// between lines with zero end curvature ([`Blend::corner`]) its first
+/// three and last three control points lie on the lines.
 ///
 /// Only X Y Z move along a blend (the planner blends only moves of X Y Z),
 /// so it keeps X Y Z control points and where the other axes stand: half
@@ -410,26 +441,9 @@ impl Blend {
         // compiler evaluates several parameters per instruction (exclusive
         // ranges: inclusive ones keep loops from being vectorised).
         const N: usize = SAMPLES + 1;
-        const U: [f64; N] = {
-            let mut u = [0.0; N];
-            let mut k = 0;
-            while k < N {
-                u[k] = k as f64 / SAMPLES as f64;
-                k += 1;
-            }
-            u
-        };
+        const U: [f64; N] = grid();
         let poly = Poly::new(&control);
-        let mut d1 = [[0.0; N]; 3];
-        let mut d2 = [[0.0; N]; 3];
-        for i in 0..3 {
-            let (c1, c2) = (&poly.d1[i], &poly.d2[i]);
-            for k in 0..N {
-                let u = U[k];
-                d1[i][k] = (((c1[4] * u + c1[3]) * u + c1[2]) * u + c1[1]) * u + c1[0];
-                d2[i][k] = ((c2[3] * u + c2[2]) * u + c2[1]) * u + c2[0];
-            }
-        }
+        let [d1, d2, _] = poly.derivatives_on::<N, false>(&U);
         let mut speed = [0.0; N];
         let mut inv = [0.0; N];
         for k in 0..N {
@@ -508,27 +522,8 @@ impl Blend {
             // `third` over arrays of parameters, as above; the reciprocal
             // of |B′| is zero where B′ vanishes, which zeroes the rate.
             const F: usize = 2 * SAMPLES + 1;
-            const UF: [f64; F] = {
-                let mut u = [0.0; F];
-                let mut k = 0;
-                while k < F {
-                    u[k] = k as f64 / (2 * SAMPLES) as f64;
-                    k += 1;
-                }
-                u
-            };
-            let mut e1 = [[0.0; F]; 3];
-            let mut e2 = [[0.0; F]; 3];
-            let mut e3 = [[0.0; F]; 3];
-            for i in 0..3 {
-                let (c1, c2) = (&poly.d1[i], &poly.d2[i]);
-                for k in 0..F {
-                    let u = UF[k];
-                    e1[i][k] = (((c1[4] * u + c1[3]) * u + c1[2]) * u + c1[1]) * u + c1[0];
-                    e2[i][k] = ((c2[3] * u + c2[2]) * u + c2[1]) * u + c2[0];
-                    e3[i][k] = c2[1] + u * (2.0 * c2[2] + u * 3.0 * c2[3]);
-                }
-            }
+            const UF: [f64; F] = grid();
+            let [e1, e2, e3] = poly.derivatives_on::<F, true>(&UF);
             let mut w1 = [0.0; F];
             let mut w2 = [0.0; F];
             let mut w3 = [0.0; F];
@@ -804,6 +799,17 @@ fn third_weights(d1: [f64; 3], d2: [f64; 3], d3: [f64; 3]) -> (f64, f64, f64) {
     )
 }
 
+/// `N` evenly spaced parameters from 0 to 1, both included.
+const fn grid<const N: usize>() -> [f64; N] {
+    let mut u = [0.0; N];
+    let mut k = 0;
+    while k < N {
+        u[k] = k as f64 / (N - 1) as f64;
+        k += 1;
+    }
+    u
+}
+
 /// Five-point Gauss–Legendre nodes on -1..1, and their weights.
 const GAUSS_X: [f64; 5] = [
     0.0,
@@ -905,6 +911,30 @@ impl Poly {
             let c = &self.d2[i];
             c[1] + u * (2.0 * c[2] + u * 3.0 * c[3])
         })
+    }
+
+    /// B′, B″ and (with `THIRD`; zeros otherwise) B‴ of each axis X Y Z
+    /// at every parameter of `u`, one axis at a time over arrays of
+    /// parameters, so that the compiler evaluates several per instruction
+    /// (the same values as [`d1`](Self::d1) and its neighbours).
+    #[inline(always)]
+    fn derivatives_on<const N: usize, const THIRD: bool>(
+        &self,
+        u: &[f64; N],
+    ) -> [[[f64; N]; 3]; 3] {
+        let mut d = [[[0.0; N]; 3]; 3];
+        for i in 0..3 {
+            let (c1, c2) = (&self.d1[i], &self.d2[i]);
+            for k in 0..N {
+                let u = u[k];
+                d[0][i][k] = (((c1[4] * u + c1[3]) * u + c1[2]) * u + c1[1]) * u + c1[0];
+                d[1][i][k] = ((c2[3] * u + c2[2]) * u + c2[1]) * u + c2[0];
+                if THIRD {
+                    d[2][i][k] = c2[1] + u * (2.0 * c2[2] + u * 3.0 * c2[3]);
+                }
+            }
+        }
+        d
     }
 
     /// |dB/du|.

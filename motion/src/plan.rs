@@ -15,7 +15,9 @@ use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, LIMIT_SLACK, MAX_JOINTS};
 use crate::merge::{CollinearMerge, MergeContext, Verdict};
-use crate::path::{corner_spread, norm, Arc, Blend, BlendExtremes, Frame, Line, Poly, Shape, Vec9};
+use crate::path::{
+    corner_spread, norm, Arc, Blend, BlendExtremes, Frame, Line, Near, Poly, Shape, Vec9,
+};
 
 /// What a segment does.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -351,8 +353,6 @@ struct Programmed {
     length: f64,
     /// Only X Y Z move (blends join such lines only).
     xyz_only: bool,
-    /// The line made ready for the blend proofs.
-    near: Near,
 }
 
 impl Programmed {
@@ -362,7 +362,6 @@ impl Programmed {
             direction: line.direction(),
             length: line.length(),
             xyz_only: (3..9).all(|i| line.start[i] == line.end[i]),
-            near: Near::new(&line),
         }
     }
 }
@@ -447,43 +446,6 @@ fn halves(q: &[[f64; 3]; 6]) -> ([[f64; 3]; 6], [[f64; 3]; 6]) {
         }
     }
     (left, right)
-}
-
-/// A programmed segment (X Y Z) made ready for the many distance tests of
-/// the blend proofs: its start, its span and 1/|span|².
-#[derive(Clone, Copy, Debug)]
-struct Near {
-    start: [f64; 3],
-    span: [f64; 3],
-    inv: f64,
-}
-
-impl Near {
-    fn new(l: &Line) -> Near {
-        let span: [f64; 3] = std::array::from_fn(|i| l.end[i] - l.start[i]);
-        let dd = span[0] * span[0] + span[1] * span[1] + span[2] * span[2];
-        Near {
-            start: [l.start[0], l.start[1], l.start[2]],
-            span,
-            inv: if dd > 0.0 { 1.0 / dd } else { 0.0 },
-        }
-    }
-
-    /// Squared distance from `p` to the segment.
-    fn distance2(&self, p: &[f64; 3]) -> f64 {
-        let (d, w): (&[f64; 3], [f64; 3]) =
-            (&self.span, std::array::from_fn(|i| p[i] - self.start[i]));
-        let t = ((w[0] * d[0] + w[1] * d[1] + w[2] * d[2]) * self.inv).clamp(0.0, 1.0);
-        let e: [f64; 3] = std::array::from_fn(|i| w[i] - t * d[i]);
-        e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
-    }
-
-    /// Whether every control point of `points` is within √`limit2` of the
-    /// segment: then, by the convex hull property and the convexity of the
-    /// distance to a segment, so is the whole curve piece they control.
-    fn hull_within(&self, points: &[[f64; 3]; 6], limit2: f64) -> bool {
-        points.iter().all(|p| self.distance2(p) <= limit2)
-    }
 }
 
 /// Halvings [`piece_near`] may make of a quarter before it gives up:
@@ -1155,8 +1117,9 @@ impl<'k> Planner<'k> {
     }
 
     /// The blend at the vertex of `a` and `b` with legs `legs` and end
-    /// curvatures `k0`, `k1`, if it stays within `b`'s tolerance of the
-    /// programmed lines (checked on 31 points, against 97 % of it).
+    /// curvatures `k0`, `k1`, if it is proven within `b`'s tolerance of
+    /// the programmed lines ([`hull_bounds`], then [`sampled_within`]) and
+    /// inside the machine's reach ([`Self::blend_in_reach`]).
     fn blend_within(
         &self,
         a: &Pending,
@@ -1187,7 +1150,7 @@ impl<'k> Planner<'k> {
         // everywhere; large end curvatures can fold it into a near-cusp,
         // where |B′| all but vanishes and arc length stops being usable.
         let min_speed = 0.3 * scale;
-        let (na, nb) = (pa.near, pb.near);
+        let (na, nb) = (Near::new(&pa.line), Near::new(&pb.line));
         let proven = hull_bounds(&control, &na, &nb, tolerance, min_speed);
         let near =
             proven.all() || sampled_within(&control, &[na, nb], tolerance, min_speed, &proven);
@@ -1296,8 +1259,8 @@ impl<'k> Planner<'k> {
     /// blend is sampled, as `check_shape` samples a move: at least 8
     /// points and one every 0.25 mm of its control polygon.
     fn blend_in_reach(&self, q: &[Vec9; 6]) -> bool {
-        let points: [[f64; 3]; 6] = std::array::from_fn(|k| [q[k][0], q[k][1], q[k][2]]);
         if !self.sample_joints {
+            let points = q.map(|p| [p[0], p[1], p[2]]);
             return hull_in_box(&points, &self.travel, SUBDIVISIONS + 2);
         }
         let polygon: f64 = (0..5)
