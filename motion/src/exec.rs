@@ -1005,7 +1005,8 @@ impl Executor {
                     }
                 }
             }
-            if found {
+            // An edge found is one jerk (lo = hi): nothing to bisect.
+            if found && hi > lo {
                 for _ in 0..16 {
                     let mid = (lo + hi) / 2.0;
                     if ahead_of(mid, self).1.ok {
