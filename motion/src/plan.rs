@@ -248,8 +248,10 @@ struct Pending {
     mode: PathMode,
     /// Length of the start taken by the blend before it.
     start_leg: f64,
-    /// Curvature chosen at the midpoint when blends take the whole line.
-    mid_curvature: Vec9,
+    /// Where the blend that took this move's start ended, when blends
+    /// take the whole line: the point, tangent and curvature the next
+    /// blend starts from (on a dense curve, from the fitted curve).
+    mid: [[f64; 3]; 3],
 }
 
 /// A waiting move as programmed (one field, not two options: waiting
@@ -278,6 +280,19 @@ impl Pending {
         match &self.source {
             AsProgrammed::Arc(arc) => Some(arc),
             AsProgrammed::Line(_) => None,
+        }
+    }
+
+    /// [`mid`](Self::mid) as a frame (the other axes where the line is).
+    fn mid_frame(&self) -> Frame {
+        let rest = self.segment.shape.start();
+        let full = |v: &[f64; 3], rest: &Vec9| -> Vec9 {
+            std::array::from_fn(|i| if i < 3 { v[i] } else { rest[i] })
+        };
+        Frame {
+            point: full(&self.mid[0], &rest),
+            tangent: full(&self.mid[1], &[0.0; 9]),
+            curvature: full(&self.mid[2], &[0.0; 9]),
         }
     }
 
@@ -394,6 +409,13 @@ pub struct Planner<'k> {
     ready: VecDeque<Segment>,
     /// G64 Q: straight feeds held for merging (merge.rs).
     merge: CollinearMerge,
+    /// The chords the curve fit sees: up to FIT_SIDE lines before the
+    /// first waiting move, while they form one polyline with it (oldest
+    /// first), then one per waiting move ([`Chord::BREAK`] for any but a
+    /// line in X Y Z).
+    chords: VecDeque<Chord>,
+    /// How many of `chords` come before the first waiting move.
+    behind: usize,
 }
 
 /// Path limits the joints impose on one segment (see `Planner::joint_limits`).
@@ -428,6 +450,242 @@ const STRAIGHT: f64 = 1e-9;
 /// Where an arc meets another move, tangents closer than this (|u1 − u2|)
 /// are one: rounding in the arc's end points bends them that much.
 const KINK: f64 = 1e-6;
+
+/// Lines on each side of a line whose midpoint the curve fit may use
+/// ([`FitWindow::fit`]).
+const FIT_SIDE: usize = 24;
+
+/// Lines on each side the fit needs; with fewer, the midpoint's curvature
+/// comes from its two vertices alone.
+const FIT_MIN_SIDE: usize = 2;
+
+/// Terms of the fitted polynomial (cubic).
+const FIT_TERMS: usize = 4;
+
+/// Path length the fit may span on each side of the centre midpoint, mm:
+/// on longer chords the rounding of their ends no longer shows in the
+/// curvature, and the fit would only flatten real features.
+const FIT_REACH: f64 = 0.5;
+
+/// Turn the fit may span on each side (|u − u_centre|, about radians):
+/// a parabola drifts from a circle, and the fitted midpoint from the
+/// chords, with the fourth power of the turn it spans.
+const FIT_TURN: f64 = 0.4;
+
+/// The fit spans no vertex bending more than this (|u1 − u2|, about 5.7°):
+/// past it the lines are corners, not chords of one curve.
+const FIT_BEND: f64 = 0.1;
+
+/// A frame no blend starts from (see `Pending::mid`).
+const UNSET_FRAME: Frame = Frame {
+    point: [0.0; 9],
+    tangent: [0.0; 9],
+    curvature: [0.0; 9],
+};
+
+/// A programmed line as the curve fit sees it.
+#[derive(Clone, Copy, Debug)]
+struct Chord {
+    midpoint: [f64; 3],
+    direction: [f64; 3],
+    length: f64,
+}
+
+impl Chord {
+    /// Where the polyline the fit may use ends (an arc, or a line that
+    /// moves more than X Y Z).
+    const BREAK: Chord = Chord {
+        midpoint: [0.0; 3],
+        direction: [0.0; 3],
+        length: f64::NAN,
+    };
+
+    fn is_break(&self) -> bool {
+        self.length.is_nan()
+    }
+
+    fn of(p: &Programmed) -> Chord {
+        Chord {
+            midpoint: std::array::from_fn(|i| 0.5 * (p.line.start[i] + p.line.end[i])),
+            direction: std::array::from_fn(|i| p.direction[i]),
+            length: p.length,
+        }
+    }
+
+    /// |u1 − u2|² between the chords' directions.
+    fn bend2(&self, other: &Chord) -> f64 {
+        (0..3)
+            .map(|i| (other.direction[i] - self.direction[i]).powi(2))
+            .sum()
+    }
+}
+
+fn norm3(v: &[f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// Midpoints a curve fit sees around one line's midpoint: their path
+/// length from it (`x`, mm, negative before it), their offsets from it
+/// (`y`, mm) and whether the fit uses them (`used`, 1 or 0). Slot 0 is the
+/// centre, slots 1..=FIT_SIDE the midpoints before it and the next
+/// FIT_SIDE those after it, nearest first; the rest pad the arrays to
+/// whole lanes.
+struct FitWindow {
+    x: [f64; FIT_SLOTS],
+    y: [[f64; FIT_SLOTS]; 3],
+    used: [f64; FIT_SLOTS],
+}
+
+/// Slots of a [`FitWindow`], in whole lanes of [`FIT_LANES`].
+const FIT_SLOTS: usize = (2 * FIT_SIDE + 1).next_multiple_of(FIT_LANES);
+
+/// Sums over a window's slots run in this many interleaved partial sums,
+/// which the compiler keeps in vector registers; the order of additions is
+/// fixed in the source, so every build gives the same bits.
+const FIT_LANES: usize = 4;
+
+impl FitWindow {
+    /// The frame at the centre midpoint of the curve that dense chords
+    /// sample: a weighted least-squares cubic through the window's
+    /// midpoints, in their path length (offsets from the centre midpoint).
+    ///
+    /// CAM output rounds its points (to 1e-5 mm or worse), which on chords
+    /// of 0.02 mm puts several per cent of noise on the curvature two
+    /// vertices give, and far more on its rate, which caps the speed
+    /// through v³·κ′. A fit over dozens of chords averages that away, and
+    /// since neighbouring fits share most of their chords, the curvature
+    /// changes little from one to the next. Midpoints, not vertices: on a
+    /// polygon inscribed in a circle they lie on one circle themselves,
+    /// with tangents along the chords, so the blends through them stay
+    /// within the chords' sag.
+    fn fit(&self) -> Option<Frame> {
+        // The same code compiled for AVX where the processor has it (see
+        // `Blend::sampled`; the same bits either way).
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor supports AVX, checked just above.
+            return unsafe { self.fit_avx() };
+        }
+        self.fit_here()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn fit_avx(&self) -> Option<Frame> {
+        self.fit_here()
+    }
+
+    #[inline(always)]
+    fn fit_here(&self) -> Option<Frame> {
+        let mut reach = 0.0f64;
+        for k in 0..FIT_SLOTS {
+            reach = reach.max(self.used[k] * self.x[k].abs());
+        }
+        let reach = 1.25 * reach;
+        let scale = 1.0 / reach;
+        // Weights that fall smoothly to zero past the outermost midpoints
+        // (tricube): with equal weights, each step of the window along the
+        // chords would drop and add a point of large leverage, and the
+        // noise would come back as jumps between neighbouring fits.
+        let mut u = [0.0; FIT_SLOTS];
+        let mut w = [0.0; FIT_SLOTS];
+        for k in 0..FIT_SLOTS {
+            u[k] = self.x[k] * scale;
+            let r = u[k].abs().min(1.0);
+            let f = 1.0 - r * r * r;
+            w[k] = self.used[k] * (f * f * f);
+        }
+        // Weighted moments Σ w·u^p (p = 0..6) and Σ w·u^p·y (p = 0..3):
+        // the normal equations of y = Σ c_p·u^p in u = x / reach (well
+        // scaled). Cubic, not quadratic: a parabola takes the cubic term of
+        // a curve whose curvature changes as a tilt of its tangent, the
+        // same at every midpoint, which the blends between them would then
+        // have to undo.
+        // Lane by lane: each pass keeps its partial sums and the powers of
+        // u in registers, FIT_LANES slots per instruction.
+        type Lanes = [f64; FIT_LANES];
+        #[inline(always)]
+        fn lanes(a: &[f64; FIT_SLOTS], c: usize) -> Lanes {
+            std::array::from_fn(|l| a[c * FIT_LANES + l])
+        }
+        #[inline(always)]
+        fn sums<const N: usize>(
+            u: &[f64; FIT_SLOTS],
+            w: &[f64; FIT_SLOTS],
+            y: Option<&[f64; FIT_SLOTS]>,
+        ) -> [f64; N] {
+            let mut acc = [[0.0; FIT_LANES]; N];
+            for c in 0..FIT_SLOTS / FIT_LANES {
+                let uc = lanes(u, c);
+                let mut p = lanes(w, c);
+                if let Some(y) = y {
+                    let yc = lanes(y, c);
+                    for l in 0..FIT_LANES {
+                        p[l] *= yc[l];
+                    }
+                }
+                for a in acc.iter_mut() {
+                    for l in 0..FIT_LANES {
+                        a[l] += p[l];
+                    }
+                    for l in 0..FIT_LANES {
+                        p[l] *= uc[l];
+                    }
+                }
+            }
+            acc.map(|a: Lanes| (a[0] + a[1]) + (a[2] + a[3]))
+        }
+        let moments: [f64; 2 * FIT_TERMS - 1] = sums(&u, &w, None);
+        let mut rhs = [[0.0; 3]; FIT_TERMS];
+        for i in 0..3 {
+            let r: [f64; FIT_TERMS] = sums(&u, &w, Some(&self.y[i]));
+            for p in 0..FIT_TERMS {
+                rhs[p][i] = r[p];
+            }
+        }
+        let mut m = [[0.0; FIT_TERMS + 3]; FIT_TERMS];
+        for row in 0..FIT_TERMS {
+            m[row][..FIT_TERMS].copy_from_slice(&moments[row..row + FIT_TERMS]);
+            m[row][FIT_TERMS..].copy_from_slice(&rhs[row]);
+        }
+        // Gaussian elimination; the matrix is positive definite (at least
+        // five distinct points), so no pivoting is needed.
+        for p in 0..FIT_TERMS {
+            // (NaN fails too.)
+            if m[p][p].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                return None;
+            }
+            for row in p + 1..FIT_TERMS {
+                let f = m[row][p] / m[p][p];
+                for col in p..FIT_TERMS + 3 {
+                    m[row][col] -= f * m[p][col];
+                }
+            }
+        }
+        let mut coef = [[0.0f64; 3]; FIT_TERMS];
+        for p in (0..FIT_TERMS).rev() {
+            for i in 0..3 {
+                let known: f64 = (p + 1..FIT_TERMS).map(|k| m[p][k] * coef[k][i]).sum();
+                coef[p][i] = (m[p][FIT_TERMS + i] - known) / m[p][p];
+            }
+        }
+        let c1: [f64; 3] = std::array::from_fn(|i| coef[1][i] / reach);
+        let c2: [f64; 3] = std::array::from_fn(|i| 2.0 * coef[2][i] / (reach * reach));
+        let speed = norm3(&c1);
+        if speed.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        let t: [f64; 3] = std::array::from_fn(|i| c1[i] / speed);
+        let along = c2[0] * t[0] + c2[1] * t[1] + c2[2] * t[2];
+        let mut frame = UNSET_FRAME;
+        for i in 0..3 {
+            frame.point[i] = coef[0][i];
+            frame.tangent[i] = t[i];
+            frame.curvature[i] = (c2[i] - along * t[i]) / (speed * speed);
+        }
+        Some(frame)
+    }
+}
 
 /// The control points of the two halves of a quintic Bézier, split at
 /// u = ½ by de Casteljau: the left half's are the first points of each
@@ -627,6 +885,8 @@ impl<'k> Planner<'k> {
             pending: VecDeque::new(),
             ready: VecDeque::new(),
             merge: CollinearMerge::new(),
+            chords: VecDeque::new(),
+            behind: 0,
         }
     }
 
@@ -1036,12 +1296,12 @@ impl<'k> Planner<'k> {
         // consume most lines whole, and they never need them.
         let mut segment = self.segment_unlimited(kind, canon.source.line, shape);
         segment.outputs = self.take_sync_outputs();
-        self.pending.push_back(Pending {
+        self.push_pending(Pending {
             segment,
             source: AsProgrammed::Line(Programmed::new(line)),
             mode: self.mode,
             start_leg: 0.0,
-            mid_curvature: [0.0; 9],
+            mid: [[0.0; 3]; 3],
         });
         self.drain(false);
         Ok(())
@@ -1057,12 +1317,12 @@ impl<'k> Planner<'k> {
         }
         let mut segment = self.segment(SegmentKind::Feed, canon.source.line, shape);
         segment.outputs = self.take_sync_outputs();
-        self.pending.push_back(Pending {
+        self.push_pending(Pending {
             segment,
             source: AsProgrammed::Arc(arc),
             mode: self.mode,
             start_leg: 0.0,
-            mid_curvature: [0.0; 9],
+            mid: [[0.0; 3]; 3],
         });
         self.drain(false);
         Ok(())
@@ -1100,6 +1360,108 @@ impl<'k> Planner<'k> {
         (legs.0.min(legs.1) >= 1e-9).then_some(legs)
     }
 
+    /// Drop the first waiting move, keeping it for the curve fit if it is
+    /// a line (an arc, or a line that moves more than X Y Z, ends the
+    /// polyline the fit sees).
+    fn pop_pending(&mut self) {
+        if self.pending.pop_front().is_none() {
+            return;
+        }
+        if self.chords[self.behind].is_break() {
+            self.chords.drain(..=self.behind);
+            self.behind = 0;
+        } else if self.behind == FIT_SIDE {
+            self.chords.pop_front();
+        } else {
+            self.behind += 1;
+        }
+    }
+
+    /// Queue a waiting move, with its chord for the curve fit.
+    fn push_pending(&mut self, pending: Pending) {
+        let chord = pending
+            .programmed()
+            .filter(|p| p.xyz_only)
+            .map_or(Chord::BREAK, Chord::of);
+        self.pending.push_back(pending);
+        self.chords.push_back(chord);
+    }
+
+    /// The frame at the midpoint of the second waiting move on the curve
+    /// fitted through it and its neighbours ([`FitWindow::fit`]), when at
+    /// least [`FIT_MIN_SIDE`] lines on each side continue it without a
+    /// corner.
+    fn fitted_mid(&self) -> Option<Frame> {
+        let pb = self.pending.get(1)?.programmed().filter(|p| p.xyz_only)?;
+        let centre = self.chords[self.behind + 1];
+        let mut window = FitWindow {
+            x: [0.0; FIT_SLOTS],
+            y: [[0.0; FIT_SLOTS]; 3],
+            used: [0.0; FIT_SLOTS],
+        };
+        window.used[0] = 1.0;
+        // The chords on one side, nearest first, into the slots from
+        // `first`, up to the first corner (a bend over FIT_BEND), and
+        // within FIT_REACH and FIT_TURN of the centre (turn measured as
+        // |u − u_centre|, which bounds how far the curve strays from a
+        // cubic there).
+        fn gather<'c>(
+            window: &mut FitWindow,
+            centre: &Chord,
+            chords: impl Iterator<Item = &'c Chord>,
+            first: usize,
+            sign: f64,
+        ) -> usize {
+            let (mut last, mut n) = (*centre, 0);
+            let (mut x, mut reach) = (0.0, 0.5 * centre.length);
+            for c in chords.take(FIT_SIDE) {
+                reach += c.length;
+                if c.is_break()
+                    || last.bend2(c) > FIT_BEND * FIT_BEND
+                    || centre.bend2(c) > FIT_TURN * FIT_TURN
+                    || reach > FIT_REACH
+                {
+                    break;
+                }
+                x += 0.5 * (last.length + c.length);
+                let k = first + n;
+                window.x[k] = sign * x;
+                for i in 0..3 {
+                    window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+                }
+                n += 1;
+                last = *c;
+            }
+            n
+        }
+        let n_before = gather(
+            &mut window,
+            &centre,
+            self.chords.range(..=self.behind).rev(),
+            1,
+            -1.0,
+        );
+        let n_after = gather(
+            &mut window,
+            &centre,
+            self.chords.range(self.behind + 2..),
+            FIT_SIDE + 1,
+            1.0,
+        );
+        let side = n_before.min(n_after);
+        if side < FIT_MIN_SIDE {
+            return None;
+        }
+        window.used[1..=side].fill(1.0);
+        window.used[FIT_SIDE + 1..=FIT_SIDE + side].fill(1.0);
+        let mut frame = window.fit()?;
+        for i in 0..3 {
+            frame.point[i] += centre.midpoint[i];
+        }
+        frame.point[3..].copy_from_slice(&pb.line.start[3..]);
+        Some(frame)
+    }
+
     /// Curvature the path should have at the midpoint of `b`, a line whose
     /// two blends meet there: the mean of the discrete curvatures at its two
     /// vertices (exactly 1/R on a polygon inscribed in a circle of radius R).
@@ -1116,34 +1478,33 @@ impl<'k> Planner<'k> {
         k
     }
 
-    /// The blend at the vertex of `a` and `b` with legs `legs` and end
-    /// curvatures `k0`, `k1`, if it is proven within `b`'s tolerance of
-    /// the programmed lines ([`hull_bounds`], then [`sampled_within`]) and
-    /// inside the machine's reach ([`Self::blend_in_reach`]).
+    /// The blend at the vertex of `a` and `b` from `start` (on `a`) to
+    /// `end` (on `b`), `legs` from the vertex, if it is proven within
+    /// `b`'s tolerance of the programmed lines ([`hull_bounds`], then
+    /// [`sampled_within`]) and inside the machine's reach
+    /// ([`Self::blend_in_reach`]).
     fn blend_within(
         &self,
         a: &Pending,
         b: &Pending,
         legs: (f64, f64),
-        k0: &Vec9,
-        k1: &Vec9,
+        start: &Frame,
+        end: &Frame,
     ) -> Option<[Vec9; 6]> {
         let (pa, pb) = (a.programmed()?, b.programmed()?);
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let la = &pa.line;
         let (u1, u2) = (&pa.direction, &pb.direction);
-        let corner = la.end;
         let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
         let scale = corner_spread(bend) * (legs.0 + legs.1);
         let control = Blend::hermite_control(
-            &std::array::from_fn(|i| corner[i] - legs.0 * u1[i]),
-            u1,
-            k0,
-            &std::array::from_fn(|i| corner[i] + legs.1 * u2[i]),
-            u2,
-            k1,
+            &start.point,
+            &start.tangent,
+            &start.curvature,
+            &end.point,
+            &end.tangent,
+            &end.curvature,
             scale,
         );
         // A well-shaped blend moves at about `scale` per unit parameter
@@ -1172,31 +1533,40 @@ impl<'k> Planner<'k> {
                 return;
             }
             let both_lines = self.pending[0].is_line() && self.pending[1].is_line();
-            if both_lines && n < 3 && !last {
-                return; // the midpoint of pending[1] depends on the next move
+            // The midpoint of pending[1] depends on the lines after it, up
+            // to FIT_SIDE of them (fewer if something else comes first).
+            let waiting = n < 2 + FIT_SIDE && self.pending.iter().skip(2).all(Pending::is_line);
+            if both_lines && waiting && !last {
+                return;
             }
             if !both_lines {
                 if let Some((legs, control)) = self.choose_arc_blend() {
-                    self.blend_corner(legs, control, [0.0; 9]);
+                    // Where the blend ends on b, should the next blend
+                    // take the rest of b (b a line: the blend ended on it
+                    // with no curvature).
+                    let mid = self.pending[1]
+                        .frame_in(legs.1, false)
+                        .unwrap_or(UNSET_FRAME);
+                    self.blend_corner(legs, control, mid);
                     continue;
                 }
             }
-            let Some((legs, control, k1)) = self.choose_blend(both_lines) else {
+            let Some((legs, control, mid)) = self.choose_blend(both_lines) else {
                 // No blend here, or none fits: stop (or go straight on) at
                 // the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
                 self.release_front(exit);
                 continue;
             };
-            self.blend_corner(legs, control, k1);
+            self.blend_corner(legs, control, mid);
         }
     }
 
     /// Trim the first two waiting moves (lines or arcs) by `legs`, emit
     /// the first, and emit the blend with control points `control` that
-    /// joins them; the second keeps waiting, with curvature `k1` chosen at
-    /// its midpoint.
-    fn blend_corner(&mut self, legs: (f64, f64), control: [Vec9; 6], k1: Vec9) {
+    /// joins them; the second keeps waiting, with `mid`, where the blend
+    /// ends, for the blend after it if that one takes the rest of it.
+    fn blend_corner(&mut self, legs: (f64, f64), control: [Vec9; 6], mid: Frame) {
         // Trim a and b in place: a waiting move is over a kilobyte, and
         // copies of them showed in profiles.
         let a = &mut self.pending[0];
@@ -1215,7 +1585,7 @@ impl<'k> Planner<'k> {
         if a.segment.length > 1e-9 * full.max(1.0) {
             self.release_front(f64::INFINITY);
         } else {
-            self.pending.pop_front();
+            self.pop_pending();
         }
         let b = self.pending.front_mut().expect("b waits");
         let full = b.full_length();
@@ -1226,7 +1596,8 @@ impl<'k> Planner<'k> {
         }
         b.segment.length = b.segment.shape.length();
         b.start_leg = legs.1;
-        b.mid_curvature = k1;
+        // X Y Z only: blends join lines that move nothing else.
+        b.mid = [&mid.point, &mid.tangent, &mid.curvature].map(|v| [v[0], v[1], v[2]]);
         let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
         let b_force = b.segment.force_control;
         // Move b's motion now starts with the blend.
@@ -1360,8 +1731,7 @@ impl<'k> Planner<'k> {
     /// The blend at the corner between the first two waiting moves, if they
     /// are lines (`both_lines`) to blend and one fits: its legs, control
     /// points and the curvature it ends with.
-    fn choose_blend(&self, both_lines: bool) -> Option<((f64, f64), [Vec9; 6], Vec9)> {
-        let zero = [0.0; 9];
+    fn choose_blend(&self, both_lines: bool) -> Option<((f64, f64), [Vec9; 6], Frame)> {
         let (a, b) = (&self.pending[0], &self.pending[1]);
         let mut legs = if both_lines {
             self.legs(a, b)?
@@ -1371,40 +1741,55 @@ impl<'k> Planner<'k> {
         let c = self.pending.get(2).filter(|c| c.is_line());
         let legs_bc = c.and_then(|c| self.legs(b, c));
         let half = |p: &Pending| p.full_length() / 2.0;
-        // A line is consumed when blends take both its halves; the
-        // curvature chosen at its midpoint is shared by both blends.
+        // Where a blend meets a line at `leg` from its start or end, with
+        // no curvature.
+        let on_line = |p: &Pending, leg: f64, from_end: bool| p.frame_in(leg, from_end);
+        // A line is consumed when blends take both its halves; the frame
+        // chosen at its midpoint is shared by both blends.
         let a_consumed = a.start_leg == half(a) && legs.0 == half(a);
-        let k0 = if a_consumed { a.mid_curvature } else { zero };
+        let start = if a_consumed {
+            a.mid_frame()
+        } else {
+            on_line(a, legs.0, true)?
+        };
         let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
-            let candidate = Self::mid_curvature(
-                a.programmed().unwrap(),
-                b.programmed().unwrap(),
-                c.programmed().unwrap(),
-            );
-            if let Some(bl) = self.blend_within(a, b, legs, &k0, &candidate) {
-                if self
-                    .blend_within(b, c, legs_bc, &candidate, &zero)
-                    .is_some()
-                {
-                    return Some((legs, bl, candidate));
+            let c_start = on_line(c, legs_bc.1, false)?;
+            // The fitted curve's frame at b's midpoint, else b's midpoint
+            // with the curvature its two vertices give.
+            let vertices = || {
+                let mut mid = on_line(b, legs.1, false)?;
+                mid.curvature = Self::mid_curvature(
+                    a.programmed().unwrap(),
+                    b.programmed().unwrap(),
+                    c.programmed().unwrap(),
+                );
+                Some(mid)
+            };
+            for mid in [self.fitted_mid(), vertices()].into_iter().flatten() {
+                if let Some(bl) = self.blend_within(a, b, legs, &start, &mid) {
+                    if self.blend_within(b, c, legs_bc, &mid, &c_start).is_some() {
+                        return Some((legs, bl, mid));
+                    }
                 }
             }
         }
-        // Zero curvature at b's end. With k0 fixed the legs are too (a's
-        // midpoint is shared); otherwise shrink them until the blend is
-        // within tolerance.
-        let mut found = self.blend_within(a, b, legs, &k0, &zero);
+        // Zero curvature at b's end. With the start fixed the legs are too
+        // (a's midpoint is shared); otherwise shrink them until the blend
+        // is within tolerance.
+        let end = |legs: (f64, f64)| on_line(b, legs.1, false);
+        let mut found = self.blend_within(a, b, legs, &start, &end(legs)?);
         if !a_consumed {
             for _ in 0..8 {
                 if found.is_some() {
                     break;
                 }
                 legs = (legs.0 * 0.7, legs.1 * 0.7);
-                found = self.blend_within(a, b, legs, &zero, &zero);
+                found = self.blend_within(a, b, legs, &on_line(a, legs.0, true)?, &end(legs)?);
             }
         }
-        found.map(|control| (legs, control, zero))
+        let mid = end(legs)?;
+        found.map(|control| (legs, control, mid))
     }
 
     /// Speed cap where `a` meets `b` without a blend: straight or tangent
@@ -1485,7 +1870,7 @@ impl<'k> Planner<'k> {
             }
             segment.exit_velocity = segment.max_velocity.min(exit);
         }
-        self.pending.pop_front();
+        self.pop_pending();
     }
 
     /// [`segment`](Self::segment) with a blend's extremes, if known.
@@ -2296,5 +2681,143 @@ mod tests {
         // 24 × 15 corners, a sixth sharper than 150° (not blended), a few
         // with moves too short for any blend to fit the tolerance.
         assert!(blends >= 24 * 15 * 3 / 4, "{blends} blends");
+    }
+}
+
+#[cfg(test)]
+mod fit_tests {
+    use super::*;
+    use crate::offline::{self, RunConfig};
+    use crate::testkit::xyz;
+    use kerf_interp::Interpreter;
+
+    /// A window of the midpoints of chords of `chord` mm inscribed in a
+    /// circle of radius `r`, `side` on each side of the centre one.
+    fn circle_window(r: f64, chord: f64, side: usize) -> (FitWindow, f64) {
+        let step = 2.0 * (chord / (2.0 * r)).asin();
+        // Midpoints lie on a circle of radius r·cos(step/2), a path
+        // length of `chord` apart along the polygon.
+        let rm = r * (step / 2.0).cos();
+        let mid = |k: f64| [rm * (k * step).cos(), rm * (k * step).sin(), 0.0];
+        let centre = mid(0.0);
+        let mut w = FitWindow {
+            x: [0.0; FIT_SLOTS],
+            y: [[0.0; FIT_SLOTS]; 3],
+            used: [0.0; FIT_SLOTS],
+        };
+        w.used[0] = 1.0;
+        for n in 1..=side {
+            for (slot, sign) in [(n, -1.0), (FIT_SIDE + n, 1.0)] {
+                let p = mid(sign * n as f64);
+                w.x[slot] = sign * n as f64 * chord;
+                for i in 0..3 {
+                    w.y[i][slot] = p[i] - centre[i];
+                }
+                w.used[slot] = 1.0;
+            }
+        }
+        (w, rm)
+    }
+
+    #[test]
+    fn the_fit_through_a_circles_chord_midpoints_gives_its_frame() {
+        // Windows as the planner gathers them: at most FIT_REACH of path
+        // and FIT_TURN of turn on each side.
+        for (r, chord, side) in [
+            (2.0, 0.02, 20),
+            (1.0, 0.04, 10),
+            (30.0, 0.02, 24),
+            (1.25, 0.02, 24),
+        ] {
+            let (w, rm) = circle_window(r, chord, side);
+            let f = w.fit().expect("a fit");
+            // The centre midpoint is at angle 0: (rm, 0) with tangent +Y
+            // and curvature 1/rm toward the centre.
+            // A cubic is not a circle: the fitted point sits a hair inside
+            // it (a few 1e-6 mm at 0.2 rad either side), the same at every
+            // midpoint of the circle, which is what keeps the blends
+            // smooth; it has to stay far inside any path tolerance.
+            let offset = f.point[0].hypot(f.point[1]);
+            assert!(offset < 1e-4, "r {r}: point off by {offset}");
+            assert!(
+                (f.tangent[1] - 1.0).abs() < 1e-9,
+                "r {r}: tangent {:?}",
+                f.tangent
+            );
+            // The circle's fourth-order term (−s⁴/24R³ across it) biases
+            // the cubic's curvature by a fraction that grows with the
+            // square of the turn the window spans; the same fraction at
+            // every midpoint of the circle.
+            let k = -f.curvature[0];
+            let turn = side as f64 * chord / r;
+            assert!(
+                (k * rm - 1.0).abs() < 0.1 * turn * turn,
+                "r {r}: curvature {k} against 1/{rm}"
+            );
+            assert!(f.curvature[1].abs() < 1e-9 * k);
+        }
+    }
+
+    /// Cycle time, deviation and limit use of two turns of a circle of
+    /// radius 5 mm in 0.02 mm chords at F3000, coordinates rounded to
+    /// `decimals`, on a machine with mill3's limits.
+    fn rounded_circle(decimals: usize) -> (f64, f64, f64, f64) {
+        let r = 5.0;
+        let n = (2.0 * std::f64::consts::PI * r / 0.02).round() as usize;
+        // Centred on X−3 so that it starts where the machine is.
+        // No G64 P: with P alone the collinear merge (Q = P) would take
+        // the chords first. The default tolerance is 0.01 mm.
+        let mut text = String::from("G21 G90\nG1 F3000\n");
+        for k in 1..=2 * n {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+            let (x, y) = (r * a.cos() - r, r * a.sin());
+            text += &format!("X{x:.decimals$} Y{y:.decimals$}\n");
+        }
+        text += "M2\n";
+        let kins = xyz(150.0, 1500.0, 75_000.0);
+        let report = offline::run(
+            Interpreter::from_text(&text, "circle.ngc", Position::ZERO),
+            &kins,
+            Position::ZERO,
+            RunConfig {
+                planner: PlannerConfig::default(),
+                record: 0,
+            },
+        )
+        .unwrap();
+        let length = 2.0 * n as f64 * 0.02;
+        (
+            report.cycle_time,
+            length,
+            report.max_deviation,
+            report.max_limit_ratio(),
+        )
+    }
+
+    #[test]
+    fn rounded_cam_chords_run_at_the_programmed_feed() {
+        // At 50 mm/s the centripetal acceleration is 500 mm/s², a third of
+        // the limit: nothing but the feed caps the speed on the circle.
+        // The exact circle takes its length at the feed and the ramps from
+        // and to rest, each losing at most its duration: on a curve the
+        // planner leaves the tangent half of A and a quarter of J (the
+        // default shares), so v/a + a/j = 0.067 + 0.04 s.
+        let (exact, length, _, _) = rounded_circle(9);
+        let feed_time = length / 50.0;
+        let ramp = 50.0 / 750.0 + 750.0 / 18_750.0;
+        assert!(
+            exact < feed_time + 2.0 * ramp,
+            "exact circle {exact} s for {feed_time} s at the feed"
+        );
+        // Without the fit, 1e-5 mm took 3.2 times as long as the exact
+        // circle; with it, 1.3 times. (1e-4 mm, 0.5 % of a chord, still
+        // takes 8 times as long: docs/motion.md, Known limits.)
+        let (time, _, deviation, use_) = rounded_circle(5);
+        assert!(
+            time < exact * 1.35,
+            "{time} s against {exact} s for the exact circle"
+        );
+        assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
+        assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
     }
 }
