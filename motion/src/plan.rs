@@ -468,20 +468,13 @@ const FIT_TERMS: usize = 4;
 const FIT_REACH: f64 = 0.5;
 
 /// Turn the fit may span on each side (|u − u_centre|, about radians):
-/// a parabola drifts from a circle, and the fitted midpoint from the
-/// chords, with the fourth power of the turn it spans.
+/// the cubic's curvature drifts from a circle's with the square of the
+/// turn it spans, and its midpoint with the fourth power.
 const FIT_TURN: f64 = 0.4;
 
 /// The fit spans no vertex bending more than this (|u1 − u2|, about 5.7°):
 /// past it the lines are corners, not chords of one curve.
 const FIT_BEND: f64 = 0.1;
-
-/// A frame no blend starts from (see `Pending::mid`).
-const UNSET_FRAME: Frame = Frame {
-    point: [0.0; 9],
-    tangent: [0.0; 9],
-    curvature: [0.0; 9],
-};
 
 /// A programmed line as the curve fit sees it.
 #[derive(Clone, Copy, Debug)]
@@ -677,13 +670,14 @@ impl FitWindow {
         }
         let t: [f64; 3] = std::array::from_fn(|i| c1[i] / speed);
         let along = c2[0] * t[0] + c2[1] * t[1] + c2[2] * t[2];
-        let mut frame = UNSET_FRAME;
-        for i in 0..3 {
-            frame.point[i] = coef[0][i];
-            frame.tangent[i] = t[i];
-            frame.curvature[i] = (c2[i] - along * t[i]) / (speed * speed);
-        }
-        Some(frame)
+        let xyz = |f: &dyn Fn(usize) -> f64| -> Vec9 {
+            std::array::from_fn(|i| if i < 3 { f(i) } else { 0.0 })
+        };
+        Some(Frame {
+            point: xyz(&|i| coef[0][i]),
+            tangent: xyz(&|i| t[i]),
+            curvature: xyz(&|i| (c2[i] - along * t[i]) / (speed * speed)),
+        })
     }
 }
 
@@ -1375,6 +1369,7 @@ impl<'k> Planner<'k> {
         } else {
             self.behind += 1;
         }
+        debug_assert_eq!(self.chords.len(), self.behind + self.pending.len());
     }
 
     /// Queue a waiting move, with its chord for the curve fit.
@@ -1385,6 +1380,7 @@ impl<'k> Planner<'k> {
             .map_or(Chord::BREAK, Chord::of);
         self.pending.push_back(pending);
         self.chords.push_back(chord);
+        debug_assert_eq!(self.chords.len(), self.behind + self.pending.len());
     }
 
     /// The frame at the midpoint of the second waiting move on the curve
@@ -1540,14 +1536,8 @@ impl<'k> Planner<'k> {
                 return;
             }
             if !both_lines {
-                if let Some((legs, control)) = self.choose_arc_blend() {
-                    // Where the blend ends on b, should the next blend
-                    // take the rest of b (b a line: the blend ended on it
-                    // with no curvature).
-                    let mid = self.pending[1]
-                        .frame_in(legs.1, false)
-                        .unwrap_or(UNSET_FRAME);
-                    self.blend_corner(legs, control, mid);
+                if let Some((legs, control, end)) = self.choose_arc_blend() {
+                    self.blend_corner(legs, control, end);
                     continue;
                 }
             }
@@ -1650,8 +1640,8 @@ impl<'k> Planner<'k> {
     /// either is an arc (lines and arcs that move X Y Z only, in G64 with
     /// a finite tolerance, turning more than [`KINK`] and at most
     /// [`SHARPEST`], or tangent where the curvature jump caps the speed
-    /// below the arc's own limit): its legs and control points, if one
-    /// fits.
+    /// below the arc's own limit): its legs, its control points and the
+    /// frame it ends with on `b`, if one fits.
     ///
     /// Its ends take the point, tangent and curvature of the line or arc
     /// they join, so the path stays G2-continuous; each leg is at most half
@@ -1659,7 +1649,7 @@ impl<'k> Planner<'k> {
     /// proven within the tolerance of the programmed line, or of chords of
     /// the programmed arc less how far those chords stray from it (see
     /// [`piece_near`]); the legs shrink until it is.
-    fn choose_arc_blend(&self) -> Option<((f64, f64), [Vec9; 6])> {
+    fn choose_arc_blend(&self) -> Option<((f64, f64), [Vec9; 6], Frame)> {
         let (a, b) = (&self.pending[0], &self.pending[1]);
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
@@ -1722,7 +1712,7 @@ impl<'k> Planner<'k> {
                 && sampled_within(&control, &near, limit, 0.3 * scale, &nothing)
                 && self.blend_in_reach(&control)
             {
-                return Some((legs, control));
+                return Some((legs, control, p1));
             }
         }
         None
@@ -2113,6 +2103,7 @@ impl<'k> Planner<'k> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::offline::{self, RunConfig};
     use crate::testkit::xyz;
     use kerf_interp::Interpreter;
 
@@ -2682,15 +2673,6 @@ mod tests {
         // with moves too short for any blend to fit the tolerance.
         assert!(blends >= 24 * 15 * 3 / 4, "{blends} blends");
     }
-}
-
-#[cfg(test)]
-mod fit_tests {
-    use super::*;
-    use crate::offline::{self, RunConfig};
-    use crate::testkit::xyz;
-    use kerf_interp::Interpreter;
-
     /// A window of the midpoints of chords of `chord` mm inscribed in a
     /// circle of radius `r`, `side` on each side of the centre one.
     fn circle_window(r: f64, chord: f64, side: usize) -> (FitWindow, f64) {
