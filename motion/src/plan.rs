@@ -482,6 +482,13 @@ struct Chord {
     midpoint: [f64; 3],
     direction: [f64; 3],
     length: f64,
+    /// Path length of the midpoint along the polyline the chord belongs
+    /// to, mm, from an origin that only differences cancel.
+    station: f64,
+    /// Whether the polyline is broken between this chord and the one
+    /// before it: a bend over [`FIT_BEND`], or either is a
+    /// [`Chord::BREAK`].
+    corner: bool,
 }
 
 impl Chord {
@@ -491,18 +498,28 @@ impl Chord {
         midpoint: [0.0; 3],
         direction: [0.0; 3],
         length: f64::NAN,
+        station: 0.0,
+        corner: true,
     };
 
     fn is_break(&self) -> bool {
         self.length.is_nan()
     }
 
-    fn of(p: &Programmed) -> Chord {
-        Chord {
+    /// The chord of `p`, following `before` (the chord queued before it).
+    fn of(p: &Programmed, before: Option<&Chord>) -> Chord {
+        let mut chord = Chord {
             midpoint: std::array::from_fn(|i| 0.5 * (p.line.start[i] + p.line.end[i])),
             direction: std::array::from_fn(|i| p.direction[i]),
             length: p.length,
+            station: 0.0,
+            corner: true,
+        };
+        if let Some(b) = before.filter(|b| !b.is_break()) {
+            chord.corner = b.bend2(&chord) > FIT_BEND * FIT_BEND;
+            chord.station = b.station + 0.5 * (b.length + chord.length);
         }
+        chord
     }
 
     /// |u1 − u2|² between the chords' directions.
@@ -517,27 +534,175 @@ fn norm3(v: &[f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// Midpoints a curve fit sees around one line's midpoint: their path
-/// length from it (`x`, mm, negative before it), their offsets from it
-/// (`y`, mm) and whether the fit uses them (`used`, 1 or 0). Slot 0 is the
-/// centre, slots 1..=FIT_SIDE the midpoints before it and the next
-/// FIT_SIDE those after it, nearest first; the rest pad the arrays to
-/// whole lanes.
+/// Midpoints a curve fit sees, in path order, as many on each side of its
+/// centre (a midpoint, or the vertex between two): their path length from
+/// the centre (`x`, mm, negative before it) and their offsets from a
+/// point near it (`y`, mm) in the first `used` slots; the rest are zero.
 struct FitWindow {
     x: [f64; FIT_SLOTS],
     y: [[f64; FIT_SLOTS]; 3],
-    used: [f64; FIT_SLOTS],
+    used: usize,
 }
 
 /// Slots of a [`FitWindow`], in whole lanes of [`FIT_LANES`].
 const FIT_SLOTS: usize = (2 * FIT_SIDE + 1).next_multiple_of(FIT_LANES);
 
 /// Sums over a window's slots run in this many interleaved partial sums,
-/// which the compiler keeps in vector registers; the order of additions is
-/// fixed in the source, so every build gives the same bits.
+/// one per lane of a vector register; the order of additions is fixed, so
+/// the plain and the AVX code give the same bits.
 const FIT_LANES: usize = 4;
 
+/// One value per lane of a fit's partial sums.
+type Lanes = [f64; FIT_LANES];
+
+/// The normal equations of a fit in partial sums, lane by lane: Σ w·u^p
+/// (p = 0..6) and Σ w·u^p·y (p = 0..3, for X, Y and Z).
+#[derive(Debug, PartialEq)]
+struct FitSums {
+    moments: [Lanes; 2 * FIT_TERMS - 1],
+    rhs: [[Lanes; FIT_TERMS]; 3],
+}
+
 impl FitWindow {
+    /// The fit's weighted sums over the first `used` slots, with the
+    /// path lengths scaled by `scale`, one lane of FIT_LANES slots after
+    /// another. Weights fall smoothly to zero past the outermost
+    /// midpoints (tricube): with equal weights, each step of the window
+    /// along the chords would drop and add a point of large leverage, and
+    /// the noise would come back as jumps between neighbouring fits.
+    ///
+    /// This is the plain version, and the reference for
+    /// [`sums_avx`](Self::sums_avx), which does the same operations in the
+    /// same order four slots per instruction: the compiler did not manage
+    /// that on its own, and the sums were half the planner's time on dense
+    /// chords.
+    fn sums_lanes(&self, used: usize, scale: f64) -> FitSums {
+        let mut s = FitSums {
+            moments: [[0.0; FIT_LANES]; 2 * FIT_TERMS - 1],
+            rhs: [[[0.0; FIT_LANES]; FIT_TERMS]; 3],
+        };
+        for c in 0..used.div_ceil(FIT_LANES) {
+            for l in 0..FIT_LANES {
+                let k = c * FIT_LANES + l;
+                let u = self.x[k] * scale;
+                let r = u.abs().min(1.0);
+                let f = 1.0 - r * r * r;
+                let mask = if k < used { 1.0 } else { 0.0 };
+                let w = f * f * f * mask;
+                let mut p = w;
+                for (m, moment) in s.moments.iter_mut().enumerate() {
+                    moment[l] += p;
+                    if m + 1 < 2 * FIT_TERMS - 1 {
+                        p *= u;
+                    }
+                }
+                for i in 0..3 {
+                    let mut p = w * self.y[i][k];
+                    for (m, rhs) in s.rhs[i].iter_mut().enumerate() {
+                        rhs[l] += p;
+                        if m + 1 < FIT_TERMS {
+                            p *= u;
+                        }
+                    }
+                }
+            }
+        }
+        s
+    }
+
+    /// [`sums_lanes`](Self::sums_lanes) in AVX instructions, four slots
+    /// at once (mul and add, no FMA: every operation rounds as there).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx")]
+    fn sums_avx(&self, used: usize, scale: f64) -> FitSums {
+        use std::arch::x86_64::*;
+        const _: () = assert!(FIT_LANES == 4 && FIT_SLOTS.is_multiple_of(4));
+        // Not closures: they would not inherit this function's AVX.
+        macro_rules! load {
+            ($a:expr, $c:expr) => {{
+                let lane: &[f64; 4] = $a[$c * 4..$c * 4 + 4].try_into().unwrap();
+                // SAFETY: `lane` is four readable f64.
+                unsafe { _mm256_loadu_pd(lane.as_ptr()) }
+            }};
+        }
+        let mut out = FitSums {
+            moments: [[0.0; 4]; 2 * FIT_TERMS - 1],
+            rhs: [[[0.0; 4]; FIT_TERMS]; 3],
+        };
+        macro_rules! store {
+            ($to:expr, $v:expr) => {
+                // SAFETY: `$to` is four writable f64.
+                unsafe { _mm256_storeu_pd($to.as_mut_ptr(), $v) }
+            };
+        }
+        let zero = _mm256_setzero_pd();
+        let one = _mm256_set1_pd(1.0);
+        let sign = _mm256_set1_pd(-0.0);
+        let scale = _mm256_set1_pd(scale);
+        let chunks = used.div_ceil(4);
+        let mut moments = [zero; 2 * FIT_TERMS - 1];
+        let mut rhs0 = [zero; FIT_TERMS];
+        // Weights and u of each lane, kept for the second pass (X, Y and Z
+        // in one pass would need more registers than there are).
+        let mut wu = [(zero, zero); FIT_SLOTS / 4];
+        for c in 0..chunks {
+            let u = _mm256_mul_pd(load!(self.x, c), scale);
+            let r = _mm256_min_pd(_mm256_andnot_pd(sign, u), one);
+            let f = _mm256_sub_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), r));
+            let mask: [f64; 4] = std::array::from_fn(|l| if c * 4 + l < used { 1.0 } else { 0.0 });
+            // SAFETY: `mask` is four readable f64.
+            let mask = unsafe { _mm256_loadu_pd(mask.as_ptr()) };
+            let w = _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask);
+            wu[c] = (w, u);
+            let mut p = w;
+            for (m, moment) in moments.iter_mut().enumerate() {
+                *moment = _mm256_add_pd(*moment, p);
+                if m + 1 < 2 * FIT_TERMS - 1 {
+                    p = _mm256_mul_pd(p, u);
+                }
+            }
+            let mut p = _mm256_mul_pd(w, load!(self.y[0], c));
+            for (m, r) in rhs0.iter_mut().enumerate() {
+                *r = _mm256_add_pd(*r, p);
+                if m + 1 < FIT_TERMS {
+                    p = _mm256_mul_pd(p, u);
+                }
+            }
+        }
+        let mut rhs12 = [[zero; FIT_TERMS]; 2];
+        for (c, &(w, u)) in wu.iter().enumerate().take(chunks) {
+            for (i, rhs) in rhs12.iter_mut().enumerate() {
+                let mut p = _mm256_mul_pd(w, load!(self.y[i + 1], c));
+                for (m, r) in rhs.iter_mut().enumerate() {
+                    *r = _mm256_add_pd(*r, p);
+                    if m + 1 < FIT_TERMS {
+                        p = _mm256_mul_pd(p, u);
+                    }
+                }
+            }
+        }
+        for (to, v) in out.moments.iter_mut().zip(moments) {
+            store!(to, v);
+        }
+        for (to, v) in out.rhs[0].iter_mut().zip(rhs0) {
+            store!(to, v);
+        }
+        for (i, rhs) in rhs12.into_iter().enumerate() {
+            for (to, v) in out.rhs[i + 1].iter_mut().zip(rhs) {
+                store!(to, v);
+            }
+        }
+        out
+    }
+
+    fn new() -> FitWindow {
+        FitWindow {
+            x: [0.0; FIT_SLOTS],
+            y: [[0.0; FIT_SLOTS]; 3],
+            used: 0,
+        }
+    }
+
     /// The frame at the centre midpoint of the curve that dense chords
     /// sample: a weighted least-squares cubic through the window's
     /// midpoints, in their path length (offsets from the centre midpoint).
@@ -551,95 +716,38 @@ impl FitWindow {
     /// polygon inscribed in a circle they lie on one circle themselves,
     /// with tangents along the chords, so the blends through them stay
     /// within the chords' sag.
-    fn fit(&self) -> Option<Frame> {
-        // The same code compiled for AVX where the processor has it (see
-        // `Blend::sampled`; the same bits either way).
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor supports AVX, checked just above.
-            return unsafe { self.fit_avx() };
+    fn fit(&self) -> Option<Cubic> {
+        let used = self.used;
+        if !(1..=FIT_SLOTS).contains(&used) {
+            return None;
         }
-        self.fit_here()
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
-    fn fit_avx(&self) -> Option<Frame> {
-        self.fit_here()
-    }
-
-    #[inline(always)]
-    fn fit_here(&self) -> Option<Frame> {
-        let mut reach = 0.0f64;
-        for k in 0..FIT_SLOTS {
-            reach = reach.max(self.used[k] * self.x[k].abs());
-        }
-        let reach = 1.25 * reach;
+        let reach = 1.25 * (-self.x[0]).max(self.x[used - 1]);
         let scale = 1.0 / reach;
-        // Weights that fall smoothly to zero past the outermost midpoints
-        // (tricube): with equal weights, each step of the window along the
-        // chords would drop and add a point of large leverage, and the
-        // noise would come back as jumps between neighbouring fits.
-        let mut u = [0.0; FIT_SLOTS];
-        let mut w = [0.0; FIT_SLOTS];
-        for k in 0..FIT_SLOTS {
-            u[k] = self.x[k] * scale;
-            let r = u[k].abs().min(1.0);
-            let f = 1.0 - r * r * r;
-            w[k] = self.used[k] * (f * f * f);
-        }
         // Weighted moments Σ w·u^p (p = 0..6) and Σ w·u^p·y (p = 0..3):
         // the normal equations of y = Σ c_p·u^p in u = x / reach (well
         // scaled). Cubic, not quadratic: a parabola takes the cubic term of
         // a curve whose curvature changes as a tilt of its tangent, the
         // same at every midpoint, which the blends between them would then
         // have to undo.
-        // Lane by lane: each pass keeps its partial sums and the powers of
-        // u in registers, FIT_LANES slots per instruction.
-        type Lanes = [f64; FIT_LANES];
-        #[inline(always)]
-        fn lanes(a: &[f64; FIT_SLOTS], c: usize) -> Lanes {
-            std::array::from_fn(|l| a[c * FIT_LANES + l])
-        }
-        #[inline(always)]
-        fn sums<const N: usize>(
-            u: &[f64; FIT_SLOTS],
-            w: &[f64; FIT_SLOTS],
-            y: Option<&[f64; FIT_SLOTS]>,
-        ) -> [f64; N] {
-            let mut acc = [[0.0; FIT_LANES]; N];
-            for c in 0..FIT_SLOTS / FIT_LANES {
-                let uc = lanes(u, c);
-                let mut p = lanes(w, c);
-                if let Some(y) = y {
-                    let yc = lanes(y, c);
-                    for l in 0..FIT_LANES {
-                        p[l] *= yc[l];
-                    }
-                }
-                for a in acc.iter_mut() {
-                    for l in 0..FIT_LANES {
-                        a[l] += p[l];
-                    }
-                    for l in 0..FIT_LANES {
-                        p[l] *= uc[l];
-                    }
-                }
-            }
-            acc.map(|a: Lanes| (a[0] + a[1]) + (a[2] + a[3]))
-        }
-        let moments: [f64; 2 * FIT_TERMS - 1] = sums(&u, &w, None);
-        let mut rhs = [[0.0; 3]; FIT_TERMS];
-        for i in 0..3 {
-            let r: [f64; FIT_TERMS] = sums(&u, &w, Some(&self.y[i]));
-            for p in 0..FIT_TERMS {
-                rhs[p][i] = r[p];
-            }
-        }
+        #[cfg(target_arch = "x86_64")]
+        let sums = if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor supports AVX, checked just above.
+            unsafe { self.sums_avx(used, scale) }
+        } else {
+            self.sums_lanes(used, scale)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let sums = self.sums_lanes(used, scale);
+        let (moments, rhs) = (sums.moments, sums.rhs);
+        let total = |a: &Lanes| (a[0] + a[1]) + (a[2] + a[3]);
         let mut m = [[0.0; FIT_TERMS + 3]; FIT_TERMS];
         for row in 0..FIT_TERMS {
-            m[row][..FIT_TERMS].copy_from_slice(&moments[row..row + FIT_TERMS]);
-            m[row][FIT_TERMS..].copy_from_slice(&rhs[row]);
+            for col in 0..FIT_TERMS {
+                m[row][col] = total(&moments[row + col]);
+            }
+            for i in 0..3 {
+                m[row][FIT_TERMS + i] = total(&rhs[i][row]);
+            }
         }
         // Gaussian elimination; the matrix is positive definite (at least
         // five distinct points), so no pivoting is needed.
@@ -662,21 +770,42 @@ impl FitWindow {
                 coef[p][i] = (m[p][FIT_TERMS + i] - known) / m[p][p];
             }
         }
-        let c1: [f64; 3] = std::array::from_fn(|i| coef[1][i] / reach);
-        let c2: [f64; 3] = std::array::from_fn(|i| 2.0 * coef[2][i] / (reach * reach));
-        let speed = norm3(&c1);
+        Some(Cubic { coef, reach })
+    }
+}
+
+/// A fitted curve: offsets from the centre midpoint of its window, mm,
+/// as a cubic in u = x / `reach`, x the path length from that midpoint.
+#[derive(Clone, Copy, Debug)]
+struct Cubic {
+    coef: [[f64; 3]; FIT_TERMS],
+    reach: f64,
+}
+
+impl Cubic {
+    /// The frame (point relative to the centre midpoint, tangent,
+    /// curvature) at `x` mm of path from the centre midpoint.
+    fn frame_at(&self, x: f64) -> Option<Frame> {
+        let (c, r) = (&self.coef, self.reach);
+        let u = x / r;
+        let point: [f64; 3] =
+            std::array::from_fn(|i| c[0][i] + u * (c[1][i] + u * (c[2][i] + u * c[3][i])));
+        let d1: [f64; 3] =
+            std::array::from_fn(|i| (c[1][i] + u * (2.0 * c[2][i] + u * 3.0 * c[3][i])) / r);
+        let d2: [f64; 3] = std::array::from_fn(|i| (2.0 * c[2][i] + u * 6.0 * c[3][i]) / (r * r));
+        let speed = norm3(&d1);
         if speed.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
-        let t: [f64; 3] = std::array::from_fn(|i| c1[i] / speed);
-        let along = c2[0] * t[0] + c2[1] * t[1] + c2[2] * t[2];
+        let t: [f64; 3] = std::array::from_fn(|i| d1[i] / speed);
+        let along = d2[0] * t[0] + d2[1] * t[1] + d2[2] * t[2];
         let xyz = |f: &dyn Fn(usize) -> f64| -> Vec9 {
             std::array::from_fn(|i| if i < 3 { f(i) } else { 0.0 })
         };
         Some(Frame {
-            point: xyz(&|i| coef[0][i]),
+            point: xyz(&|i| point[i]),
             tangent: xyz(&|i| t[i]),
-            curvature: xyz(&|i| (c2[i] - along * t[i]) / (speed * speed)),
+            curvature: xyz(&|i| (d2[i] - along * t[i]) / (speed * speed)),
         })
     }
 }
@@ -1377,7 +1506,7 @@ impl<'k> Planner<'k> {
         let chord = pending
             .programmed()
             .filter(|p| p.xyz_only)
-            .map_or(Chord::BREAK, Chord::of);
+            .map_or(Chord::BREAK, |p| Chord::of(p, self.chords.back()));
         self.pending.push_back(pending);
         self.chords.push_back(chord);
         debug_assert_eq!(self.chords.len(), self.behind + self.pending.len());
@@ -1389,73 +1518,67 @@ impl<'k> Planner<'k> {
     /// corner.
     fn fitted_mid(&self) -> Option<Frame> {
         let pb = self.pending.get(1)?.programmed().filter(|p| p.xyz_only)?;
-        let centre = self.chords[self.behind + 1];
-        let mut window = FitWindow {
-            x: [0.0; FIT_SLOTS],
-            y: [[0.0; FIT_SLOTS]; 3],
-            used: [0.0; FIT_SLOTS],
-        };
-        window.used[0] = 1.0;
-        // The chords on one side, nearest first, into the slots from
-        // `first`, up to the first corner (a bend over FIT_BEND), and
-        // within FIT_REACH and FIT_TURN of the centre (turn measured as
-        // |u − u_centre|, which bounds how far the curve strays from a
-        // cubic there).
-        fn gather<'c>(
-            window: &mut FitWindow,
-            centre: &Chord,
-            chords: impl Iterator<Item = &'c Chord>,
-            first: usize,
-            sign: f64,
-        ) -> usize {
-            let (mut last, mut n) = (*centre, 0);
-            let (mut x, mut reach) = (0.0, 0.5 * centre.length);
-            for c in chords.take(FIT_SIDE) {
-                reach += c.length;
-                if c.is_break()
-                    || last.bend2(c) > FIT_BEND * FIT_BEND
-                    || centre.bend2(c) > FIT_TURN * FIT_TURN
-                    || reach > FIT_REACH
-                {
-                    break;
-                }
-                x += 0.5 * (last.length + c.length);
-                let k = first + n;
-                window.x[k] = sign * x;
-                for i in 0..3 {
-                    window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
-                }
-                n += 1;
-                last = *c;
-            }
-            n
-        }
-        let n_before = gather(
-            &mut window,
-            &centre,
-            self.chords.range(..=self.behind).rev(),
-            1,
-            -1.0,
-        );
-        let n_after = gather(
-            &mut window,
-            &centre,
-            self.chords.range(self.behind + 2..),
-            FIT_SIDE + 1,
-            1.0,
-        );
-        let side = n_before.min(n_after);
+        let at = self.behind + 1;
+        let centre = &self.chords[at];
+        let side = self.fit_side(centre, at + 1, at, FIT_MIN_SIDE);
         if side < FIT_MIN_SIDE {
             return None;
         }
-        window.used[1..=side].fill(1.0);
-        window.used[FIT_SIDE + 1..=FIT_SIDE + side].fill(1.0);
-        let mut frame = window.fit()?;
+        let mut window = FitWindow::new();
+        window.used = 2 * side + 1;
+        self.fill_window(&mut window, at - side, centre);
+        let mut frame = window.fit()?.frame_at(0.0)?;
         for i in 0..3 {
             frame.point[i] += centre.midpoint[i];
         }
         frame.point[3..].copy_from_slice(&pb.line.start[3..]);
         Some(frame)
+    }
+
+    /// How many chords a fit centred on `centre` may take on each side:
+    /// as many as both sides have, those from `after` on and those before
+    /// `before_end` (backwards), before a corner (a bend over FIT_BEND)
+    /// and within FIT_REACH and FIT_TURN of the centre (turn measured as
+    /// |u − u_centre|, which bounds how far the curve strays from a cubic
+    /// there). Counting stops below `least`, which is not enough anyway.
+    fn fit_side(&self, centre: &Chord, after: usize, before_end: usize, least: usize) -> usize {
+        let within = |c: &Chord| {
+            (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
+                && centre.bend2(c) <= FIT_TURN * FIT_TURN
+        };
+        let mut n_after = 0;
+        for c in self.chords.range(after..).take(FIT_SIDE) {
+            if c.corner || !within(c) {
+                break;
+            }
+            n_after += 1;
+        }
+        if n_after < least {
+            return n_after;
+        }
+        // A chord's `corner` is its bend to the one before it.
+        let mut side = 0;
+        let mut nearer = &self.chords[before_end];
+        for c in self.chords.range(..before_end).rev().take(n_after) {
+            if nearer.corner || !within(c) {
+                break;
+            }
+            side += 1;
+            nearer = c;
+        }
+        side
+    }
+
+    /// Fill `window.used` slots from the chord at `first`: path lengths
+    /// and offsets from `centre`.
+    fn fill_window(&self, window: &mut FitWindow, first: usize, centre: &Chord) {
+        let chords = self.chords.range(first..first + window.used);
+        for (k, c) in chords.enumerate() {
+            window.x[k] = c.station - centre.station;
+            for i in 0..3 {
+                window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+            }
+        }
     }
 
     /// Curvature the path should have at the midpoint of `b`, a line whose
@@ -2673,6 +2796,40 @@ mod tests {
         // with moves too short for any blend to fit the tolerance.
         assert!(blends >= 24 * 15 * 3 / 4, "{blends} blends");
     }
+    #[test]
+    fn the_fits_avx_sums_are_its_plain_sums_bit_for_bit() {
+        // Plans must not depend on the processor they were made on.
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            let mut rand = crate::testkit::uniform(7);
+            for used in 1..=FIT_SLOTS {
+                let mut w = FitWindow::new();
+                w.used = used;
+                for k in 0..used {
+                    w.x[k] = (k as f64 - used as f64 / 2.0) * 0.02 + 1e-3 * rand();
+                    for i in 0..3 {
+                        w.y[i][k] = 0.3 * rand() - 0.15;
+                    }
+                }
+                let scale = 1.0 / (0.03 * used as f64);
+                let plain = w.sums_lanes(used, scale);
+                // SAFETY: the processor supports AVX, checked above.
+                let avx = unsafe { w.sums_avx(used, scale) };
+                let bits = |s: &FitSums| -> Vec<u64> {
+                    let rhs = s.rhs.iter().flatten();
+                    s.moments
+                        .iter()
+                        .chain(rhs)
+                        .flatten()
+                        .map(|v| v.to_bits())
+                        .collect()
+                };
+                assert_eq!(bits(&plain), bits(&avx), "{used} slots");
+                assert!(plain.moments[0].iter().sum::<f64>() > 0.0);
+            }
+        }
+    }
+
     /// A window of the midpoints of chords of `chord` mm inscribed in a
     /// circle of radius `r`, `side` on each side of the centre one.
     fn circle_window(r: f64, chord: f64, side: usize) -> (FitWindow, f64) {
@@ -2682,20 +2839,13 @@ mod tests {
         let rm = r * (step / 2.0).cos();
         let mid = |k: f64| [rm * (k * step).cos(), rm * (k * step).sin(), 0.0];
         let centre = mid(0.0);
-        let mut w = FitWindow {
-            x: [0.0; FIT_SLOTS],
-            y: [[0.0; FIT_SLOTS]; 3],
-            used: [0.0; FIT_SLOTS],
-        };
-        w.used[0] = 1.0;
-        for n in 1..=side {
-            for (slot, sign) in [(n, -1.0), (FIT_SIDE + n, 1.0)] {
-                let p = mid(sign * n as f64);
-                w.x[slot] = sign * n as f64 * chord;
-                for i in 0..3 {
-                    w.y[i][slot] = p[i] - centre[i];
-                }
-                w.used[slot] = 1.0;
+        let mut w = FitWindow::new();
+        w.used = 2 * side + 1;
+        for (k, n) in (-(side as i32)..=side as i32).enumerate() {
+            let p = mid(n as f64);
+            w.x[k] = n as f64 * chord;
+            for i in 0..3 {
+                w.y[i][k] = p[i] - centre[i];
             }
         }
         (w, rm)
@@ -2712,7 +2862,7 @@ mod tests {
             (1.25, 0.02, 24),
         ] {
             let (w, rm) = circle_window(r, chord, side);
-            let f = w.fit().expect("a fit");
+            let f = w.fit().and_then(|c| c.frame_at(0.0)).expect("a fit");
             // The centre midpoint is at angle 0: (rm, 0) with tangent +Y
             // and curvature 1/rm toward the centre.
             // A cubic is not a circle: the fitted point sits a hair inside
