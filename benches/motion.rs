@@ -180,10 +180,13 @@ fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     }
     let total = t0.elapsed().as_secs_f64();
     let plan = (total - interp).max(1e-9);
+    // Segments out (a line a blend consumes gives none, a blended corner
+    // two) and canon commands in (one per programmed move) both count.
     println!(
-        "{name:<28} {segments:>9} segments  interp+plan {:>10.0} seg/s  plan alone {:>10.0} seg/s  ({canon} canon)",
+        "{name:<28} {segments:>9} segments  interp+plan {:>10.0} seg/s  plan alone {:>10.0} seg/s {:>10.0} canon/s  ({canon} canon)",
         segments as f64 / total,
-        segments as f64 / plan
+        segments as f64 / plan,
+        canon as f64 / plan
     );
 }
 

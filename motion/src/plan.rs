@@ -1464,7 +1464,12 @@ impl<'k> Planner<'k> {
         };
         let (u1, u2) = (&la.direction, &lb.direction);
         let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
-        if !(STRAIGHT..=SHARPEST).contains(&bend) || !la.xyz_only || !lb.xyz_only {
+        // Straight on between long lines needs no blend. Between chords of
+        // a dense curve it is rounding (at 1e-4 mm on 0.02 mm chords most
+        // neighbours that would bend by under 0.005 rad come out straight):
+        // the curve goes on through it, and a blend carries its curvature.
+        let chords = la.length <= FIT_REACH && lb.length <= FIT_REACH;
+        if bend > SHARPEST || bend < STRAIGHT && !chords || !la.xyz_only || !lb.xyz_only {
             return None;
         }
         // Closed-form leg of a symmetric blend with zero end curvature: its
@@ -2942,14 +2947,19 @@ mod tests {
             "exact circle {exact} s for {feed_time} s at the feed"
         );
         // Without the fit, 1e-5 mm took 3.2 times as long as the exact
-        // circle; with it, 1.3 times. (1e-4 mm, 0.5 % of a chord, still
-        // takes 8 times as long: docs/motion.md, Known limits.)
-        let (time, _, deviation, use_) = rounded_circle(5);
-        assert!(
-            time < exact * 1.35,
-            "{time} s against {exact} s for the exact circle"
-        );
-        assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
-        assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
+        // circle; with it, 1.3 times. At 1e-4 mm (0.5 % of a chord) most
+        // neighbouring chords come out straight on; blended like the
+        // others they take 2.4 times as long as the exact circle, left
+        // straight (a stop of curvature at each) 8 times. (The rest is the
+        // noise between neighbouring fits: docs/motion.md, Known limits.)
+        for (decimals, within) in [(5, 1.35), (4, 3.0)] {
+            let (time, _, deviation, use_) = rounded_circle(decimals);
+            assert!(
+                time < exact * within,
+                "{decimals} decimals: {time} s against {exact} s for the exact circle"
+            );
+            assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
+            assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
+        }
     }
 }
