@@ -534,10 +534,10 @@ fn norm3(v: &[f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
-/// Midpoints a curve fit sees, in path order, as many on each side of its
-/// centre (a midpoint, or the vertex between two): their path length from
-/// the centre (`x`, mm, negative before it) and their offsets from a
-/// point near it (`y`, mm) in the first `used` slots; the rest are zero.
+/// Midpoints a curve fit sees around one line's midpoint, in path order,
+/// as many before it as after it: their path length from it (`x`, mm,
+/// negative before it) and their offsets from it (`y`, mm) in the first
+/// `used` slots; the rest are zero.
 struct FitWindow {
     x: [f64; FIT_SLOTS],
     y: [[f64; FIT_SLOTS]; 3],
@@ -716,7 +716,7 @@ impl FitWindow {
     /// polygon inscribed in a circle they lie on one circle themselves,
     /// with tangents along the chords, so the blends through them stay
     /// within the chords' sag.
-    fn fit(&self) -> Option<Cubic> {
+    fn fit(&self) -> Option<Frame> {
         let used = self.used;
         if !(1..=FIT_SLOTS).contains(&used) {
             return None;
@@ -770,42 +770,22 @@ impl FitWindow {
                 coef[p][i] = (m[p][FIT_TERMS + i] - known) / m[p][p];
             }
         }
-        Some(Cubic { coef, reach })
-    }
-}
-
-/// A fitted curve: offsets from the centre midpoint of its window, mm,
-/// as a cubic in u = x / `reach`, x the path length from that midpoint.
-#[derive(Clone, Copy, Debug)]
-struct Cubic {
-    coef: [[f64; 3]; FIT_TERMS],
-    reach: f64,
-}
-
-impl Cubic {
-    /// The frame (point relative to the centre midpoint, tangent,
-    /// curvature) at `x` mm of path from the centre midpoint.
-    fn frame_at(&self, x: f64) -> Option<Frame> {
-        let (c, r) = (&self.coef, self.reach);
-        let u = x / r;
-        let point: [f64; 3] =
-            std::array::from_fn(|i| c[0][i] + u * (c[1][i] + u * (c[2][i] + u * c[3][i])));
-        let d1: [f64; 3] =
-            std::array::from_fn(|i| (c[1][i] + u * (2.0 * c[2][i] + u * 3.0 * c[3][i])) / r);
-        let d2: [f64; 3] = std::array::from_fn(|i| (2.0 * c[2][i] + u * 6.0 * c[3][i]) / (r * r));
-        let speed = norm3(&d1);
+        // The frame at the centre midpoint (u = 0), relative to it.
+        let c1: [f64; 3] = std::array::from_fn(|i| coef[1][i] / reach);
+        let c2: [f64; 3] = std::array::from_fn(|i| 2.0 * coef[2][i] / (reach * reach));
+        let speed = norm3(&c1);
         if speed.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
-        let t: [f64; 3] = std::array::from_fn(|i| d1[i] / speed);
-        let along = d2[0] * t[0] + d2[1] * t[1] + d2[2] * t[2];
+        let t: [f64; 3] = std::array::from_fn(|i| c1[i] / speed);
+        let along = c2[0] * t[0] + c2[1] * t[1] + c2[2] * t[2];
         let xyz = |f: &dyn Fn(usize) -> f64| -> Vec9 {
             std::array::from_fn(|i| if i < 3 { f(i) } else { 0.0 })
         };
         Some(Frame {
-            point: xyz(&|i| point[i]),
+            point: xyz(&|i| coef[0][i]),
             tangent: xyz(&|i| t[i]),
-            curvature: xyz(&|i| (d2[i] - along * t[i]) / (speed * speed)),
+            curvature: xyz(&|i| (c2[i] - along * t[i]) / (speed * speed)),
         })
     }
 }
@@ -1469,7 +1449,7 @@ impl<'k> Planner<'k> {
         // neighbours that would bend by under 0.005 rad come out straight):
         // the curve goes on through it, and a blend carries its curvature.
         let chords = la.length <= FIT_REACH && lb.length <= FIT_REACH;
-        if bend > SHARPEST || bend < STRAIGHT && !chords || !la.xyz_only || !lb.xyz_only {
+        if bend > SHARPEST || (bend < STRAIGHT && !chords) || !la.xyz_only || !lb.xyz_only {
             return None;
         }
         // Closed-form leg of a symmetric blend with zero end curvature: its
@@ -1525,14 +1505,19 @@ impl<'k> Planner<'k> {
         let pb = self.pending.get(1)?.programmed().filter(|p| p.xyz_only)?;
         let at = self.behind + 1;
         let centre = &self.chords[at];
-        let side = self.fit_side(centre, at + 1, at, FIT_MIN_SIDE);
+        let side = self.fit_side(at);
         if side < FIT_MIN_SIDE {
             return None;
         }
         let mut window = FitWindow::new();
         window.used = 2 * side + 1;
-        self.fill_window(&mut window, at - side, centre);
-        let mut frame = window.fit()?.frame_at(0.0)?;
+        for (k, c) in self.chords.range(at - side..=at + side).enumerate() {
+            window.x[k] = c.station - centre.station;
+            for i in 0..3 {
+                window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+            }
+        }
+        let mut frame = window.fit()?;
         for i in 0..3 {
             frame.point[i] += centre.midpoint[i];
         }
@@ -1540,31 +1525,28 @@ impl<'k> Planner<'k> {
         Some(frame)
     }
 
-    /// How many chords a fit centred on `centre` may take on each side:
-    /// as many as both sides have, those from `after` on and those before
-    /// `before_end` (backwards), before a corner (a bend over FIT_BEND)
-    /// and within FIT_REACH and FIT_TURN of the centre (turn measured as
-    /// |u − u_centre|, which bounds how far the curve strays from a cubic
-    /// there). Counting stops below `least`, which is not enough anyway.
-    fn fit_side(&self, centre: &Chord, after: usize, before_end: usize, least: usize) -> usize {
+    /// How many chords a fit centred on the midpoint of chord `at` may
+    /// take on each side: as many as both sides have before a corner (a
+    /// bend over FIT_BEND), within FIT_REACH and FIT_TURN of the centre
+    /// (turn measured as |u − u_centre|, which bounds how far the curve
+    /// strays from a cubic there).
+    fn fit_side(&self, at: usize) -> usize {
+        let centre = &self.chords[at];
         let within = |c: &Chord| {
             (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
                 && centre.bend2(c) <= FIT_TURN * FIT_TURN
         };
-        let mut n_after = 0;
-        for c in self.chords.range(after..).take(FIT_SIDE) {
+        let mut after = 0;
+        for c in self.chords.range(at + 1..).take(FIT_SIDE) {
             if c.corner || !within(c) {
                 break;
             }
-            n_after += 1;
-        }
-        if n_after < least {
-            return n_after;
+            after += 1;
         }
         // A chord's `corner` is its bend to the one before it.
         let mut side = 0;
-        let mut nearer = &self.chords[before_end];
-        for c in self.chords.range(..before_end).rev().take(n_after) {
+        let mut nearer = centre;
+        for c in self.chords.range(..at).rev().take(after) {
             if nearer.corner || !within(c) {
                 break;
             }
@@ -1572,18 +1554,6 @@ impl<'k> Planner<'k> {
             nearer = c;
         }
         side
-    }
-
-    /// Fill `window.used` slots from the chord at `first`: path lengths
-    /// and offsets from `centre`.
-    fn fill_window(&self, window: &mut FitWindow, first: usize, centre: &Chord) {
-        let chords = self.chords.range(first..first + window.used);
-        for (k, c) in chords.enumerate() {
-            window.x[k] = c.station - centre.station;
-            for i in 0..3 {
-                window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
-            }
-        }
     }
 
     /// Curvature the path should have at the midpoint of `b`, a line whose
@@ -2867,7 +2837,7 @@ mod tests {
             (1.25, 0.02, 24),
         ] {
             let (w, rm) = circle_window(r, chord, side);
-            let f = w.fit().and_then(|c| c.frame_at(0.0)).expect("a fit");
+            let f = w.fit().expect("a fit");
             // The centre midpoint is at angle 0: (rm, 0) with tangent +Y
             // and curvature 1/rm toward the centre.
             // A cubic is not a circle: the fitted point sits a hair inside
