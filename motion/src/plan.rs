@@ -11,6 +11,8 @@
 
 use std::collections::VecDeque;
 
+mod ahead;
+
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, LIMIT_SLACK, MAX_JOINTS};
@@ -219,6 +221,11 @@ pub struct PlannerConfig {
     /// below).
     pub digital_inputs: usize,
     pub analog_inputs: usize,
+    /// Work out dense-curve blends ahead on a second thread (`plan/ahead.rs`).
+    /// The plan is the same bit for bit either way; with a core to spare
+    /// it comes faster. The planner then holds back a few hundred more
+    /// lines before releasing segments (until the program ends or stops).
+    pub blend_worker: bool,
 }
 
 impl Default for PlannerConfig {
@@ -234,9 +241,14 @@ impl Default for PlannerConfig {
             analog_outputs: MAX_ANALOG_OUTPUTS,
             digital_inputs: MAX_DIGITAL_OUTPUTS,
             analog_inputs: MAX_ANALOG_OUTPUTS,
+            blend_worker: true,
         }
     }
 }
+
+/// A blend the planner chose: its legs, control points, the frame it ends
+/// with, and its sampled table if already worked out.
+type Chosen = ((f64, f64), [Vec9; 6], Frame, Option<(Blend, BlendExtremes)>);
 
 /// A move waiting for its successors, which decide its end.
 #[derive(Clone, Copy, Debug)]
@@ -308,16 +320,7 @@ impl Pending {
     /// its end); `None` unless it is a line or arc that moves X Y Z only.
     fn frame_in(&self, leg: f64, from_end: bool) -> Option<Frame> {
         if let Some(p) = self.programmed().filter(|p| p.xyz_only) {
-            let (corner, sign) = if from_end {
-                (p.line.end, -1.0)
-            } else {
-                (p.line.start, 1.0)
-            };
-            return Some(Frame {
-                point: std::array::from_fn(|i| corner[i] + sign * leg * p.direction[i]),
-                tangent: p.direction,
-                curvature: [0.0; 9],
-            });
+            return Some(p.frame_at(leg, from_end));
         }
         let arc = self.arc()?;
         let xyz = arc.plane.0 < 3 && arc.plane.1 < 3 && (3..9).all(|i| arc.start[i] == arc.end[i]);
@@ -379,6 +382,91 @@ impl Programmed {
             xyz_only: (3..9).all(|i| line.start[i] == line.end[i]),
         }
     }
+
+    /// Point and tangent `leg` mm from the line's start (`from_end`: from
+    /// its end), with no curvature.
+    fn frame_at(&self, leg: f64, from_end: bool) -> Frame {
+        let (corner, sign) = if from_end {
+            (self.line.end, -1.0)
+        } else {
+            (self.line.start, 1.0)
+        };
+        Frame {
+            point: std::array::from_fn(|i| corner[i] + sign * leg * self.direction[i]),
+            tangent: self.direction,
+            curvature: [0.0; 9],
+        }
+    }
+}
+
+/// The blend legs at the vertex between lines `la` and `lb`, `lb`
+/// programmed in `mode`: how much of `la`'s end and of `lb`'s start the
+/// blend replaces (None: no blend). Each leg is the tolerance's leg or
+/// half its line, whichever is less, so on dense paths blends meet at line
+/// midpoints.
+fn blend_legs(la: &Programmed, lb: &Programmed, mode: PathMode) -> Option<(f64, f64)> {
+    let PathMode::Blend { tolerance } = mode else {
+        return None;
+    };
+    let (u1, u2) = (&la.direction, &lb.direction);
+    let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
+    // Straight on between long lines needs no blend. Between chords of
+    // a dense curve it is rounding (at 1e-4 mm on 0.02 mm chords most
+    // neighbours that would bend by under 0.005 rad come out straight):
+    // the curve goes on through it, and a blend carries its curvature.
+    let chords = la.length <= FIT_REACH && lb.length <= FIT_REACH;
+    if bend > SHARPEST || (bend < STRAIGHT && !chords) || !la.xyz_only || !lb.xyz_only {
+        return None;
+    }
+    // Closed-form leg of a symmetric blend with zero end curvature: its
+    // deviation is proportional to the leg.
+    let leg = tolerance / Blend::deviation(1.0, u1, u2);
+    let (a, b) = (leg.min(la.length / 2.0), leg.min(lb.length / 2.0));
+    // Unequal legs let dense curves blend midpoint to midpoint though
+    // neighbouring chords differ a little; a tolerance bounds how far
+    // they stray. Without one (G64 with no P), bound the ratio instead,
+    // so a long move cannot swing a wide blend into a short one.
+    let legs = if tolerance.is_finite() {
+        (a, b)
+    } else {
+        (a.min(2.0 * b), b.min(2.0 * a))
+    };
+    (legs.0.min(legs.1) >= 1e-9).then_some(legs)
+}
+
+/// The blend at the vertex of lines `pa` and `pb` from `start` (on `pa`)
+/// to `end` (on `pb`), `legs` from the vertex: its control points, and
+/// whether it is proven within `tolerance` of the two lines
+/// ([`hull_bounds`], then [`sampled_within`]). Whether it stays where the
+/// machine can go is the planner's to check.
+fn blend_near(
+    pa: &Programmed,
+    pb: &Programmed,
+    tolerance: f64,
+    legs: (f64, f64),
+    start: &Frame,
+    end: &Frame,
+) -> ([Vec9; 6], bool) {
+    let (u1, u2) = (&pa.direction, &pb.direction);
+    let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
+    let scale = corner_spread(bend) * (legs.0 + legs.1);
+    let control = Blend::hermite_control(
+        &start.point,
+        &start.tangent,
+        &start.curvature,
+        &end.point,
+        &end.tangent,
+        &end.curvature,
+        scale,
+    );
+    // A well-shaped blend moves at about `scale` per unit parameter
+    // everywhere; large end curvatures can fold it into a near-cusp,
+    // where |B′| all but vanishes and arc length stops being usable.
+    let min_speed = 0.3 * scale;
+    let (na, nb) = (Near::new(&pa.line), Near::new(&pb.line));
+    let proven = hull_bounds(&control, &na, &nb, tolerance, min_speed);
+    let near = proven.all() || sampled_within(&control, &[na, nb], tolerance, min_speed, &proven);
+    (control, near)
 }
 
 /// Turns canon into segments for one machine.
@@ -416,6 +504,11 @@ pub struct Planner<'k> {
     chords: VecDeque<Chord>,
     /// How many of `chords` come before the first waiting move.
     behind: usize,
+    /// Waiting moves released so far (the first waiting move's index
+    /// among all moves queued).
+    released: u64,
+    /// The blend worker, if there is one.
+    ahead: Option<ahead::Ahead>,
 }
 
 /// Path limits the joints impose on one segment (see `Planner::joint_limits`).
@@ -532,6 +625,63 @@ impl Chord {
 
 fn norm3(v: &[f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+/// The frame at the midpoint of `chords[at]`, the chord of line `p`, on
+/// the curve fitted through it and its neighbours ([`FitWindow::fit`]),
+/// when at least [`FIT_MIN_SIDE`] chords on each side continue it without
+/// a corner. Only chords before `end` are seen.
+fn fitted_frame(chords: &VecDeque<Chord>, at: usize, end: usize, p: &Programmed) -> Option<Frame> {
+    let centre = &chords[at];
+    let side = fit_side(chords, at, end);
+    if side < FIT_MIN_SIDE {
+        return None;
+    }
+    let mut window = FitWindow::new();
+    window.used = 2 * side + 1;
+    for (k, c) in chords.range(at - side..=at + side).enumerate() {
+        window.x[k] = c.station - centre.station;
+        for i in 0..3 {
+            window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+        }
+    }
+    let mut frame = window.fit()?;
+    for i in 0..3 {
+        frame.point[i] += centre.midpoint[i];
+    }
+    frame.point[3..].copy_from_slice(&p.line.start[3..]);
+    Some(frame)
+}
+
+/// How many chords a fit centred on the midpoint of `chords[at]` may take
+/// on each side, seeing those before `end`: as many as both sides have
+/// before a corner (a bend over FIT_BEND), within FIT_REACH and FIT_TURN
+/// of the centre (turn measured as |u − u_centre|, which bounds how far
+/// the curve strays from a cubic there).
+fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize) -> usize {
+    let centre = &chords[at];
+    let within = |c: &Chord| {
+        (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
+            && centre.bend2(c) <= FIT_TURN * FIT_TURN
+    };
+    let mut after = 0;
+    for c in chords.range(at + 1..end).take(FIT_SIDE) {
+        if c.corner || !within(c) {
+            break;
+        }
+        after += 1;
+    }
+    // A chord's `corner` is its bend to the one before it.
+    let mut side = 0;
+    let mut nearer = centre;
+    for c in chords.range(..at).rev().take(after) {
+        if nearer.corner || !within(c) {
+            break;
+        }
+        side += 1;
+        nearer = c;
+    }
+    side
 }
 
 /// Midpoints a curve fit sees around one line's midpoint, in path order,
@@ -990,6 +1140,8 @@ impl<'k> Planner<'k> {
             merge: CollinearMerge::new(),
             chords: VecDeque::new(),
             behind: 0,
+            released: 0,
+            ahead: config.blend_worker.then(ahead::Ahead::start).flatten(),
         }
     }
 
@@ -1022,6 +1174,9 @@ impl<'k> Planner<'k> {
     /// dwell, or anything else that stops the machine).
     pub fn finish(&mut self) {
         self.release_merged();
+        if let Some(ahead) = &mut self.ahead {
+            ahead.flush();
+        }
         self.drain(true);
     }
 
@@ -1431,41 +1586,10 @@ impl<'k> Planner<'k> {
         Ok(())
     }
 
-    /// The blend legs at the vertex between lines `a` and `b`: how much of
-    /// `a`'s end and of `b`'s start the blend replaces (None: no blend).
-    /// Each leg is the tolerance's leg or half its line, whichever is less,
-    /// so on dense paths blends meet at line midpoints.
+    /// [`blend_legs`] between waiting moves `a` and `b` (None unless both
+    /// are lines).
     fn legs(&self, a: &Pending, b: &Pending) -> Option<(f64, f64)> {
-        let (Some(la), Some(lb)) = (a.programmed(), b.programmed()) else {
-            return None;
-        };
-        let PathMode::Blend { tolerance } = b.mode else {
-            return None;
-        };
-        let (u1, u2) = (&la.direction, &lb.direction);
-        let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
-        // Straight on between long lines needs no blend. Between chords of
-        // a dense curve it is rounding (at 1e-4 mm on 0.02 mm chords most
-        // neighbours that would bend by under 0.005 rad come out straight):
-        // the curve goes on through it, and a blend carries its curvature.
-        let chords = la.length <= FIT_REACH && lb.length <= FIT_REACH;
-        if bend > SHARPEST || (bend < STRAIGHT && !chords) || !la.xyz_only || !lb.xyz_only {
-            return None;
-        }
-        // Closed-form leg of a symmetric blend with zero end curvature: its
-        // deviation is proportional to the leg.
-        let leg = tolerance / Blend::deviation(1.0, u1, u2);
-        let (a, b) = (leg.min(la.length / 2.0), leg.min(lb.length / 2.0));
-        // Unequal legs let dense curves blend midpoint to midpoint though
-        // neighbouring chords differ a little; a tolerance bounds how far
-        // they stray. Without one (G64 with no P), bound the ratio instead,
-        // so a long move cannot swing a wide blend into a short one.
-        let legs = if tolerance.is_finite() {
-            (a, b)
-        } else {
-            (a.min(2.0 * b), b.min(2.0 * a))
-        };
-        (legs.0.min(legs.1) >= 1e-9).then_some(legs)
+        blend_legs(a.programmed()?, b.programmed()?, b.mode)
     }
 
     /// Drop the first waiting move, keeping it for the curve fit if it is
@@ -1475,6 +1599,7 @@ impl<'k> Planner<'k> {
         if self.pending.pop_front().is_none() {
             return;
         }
+        self.released += 1;
         if self.chords[self.behind].is_break() {
             self.chords.drain(..=self.behind);
             self.behind = 0;
@@ -1488,72 +1613,27 @@ impl<'k> Planner<'k> {
 
     /// Queue a waiting move, with its chord for the curve fit.
     fn push_pending(&mut self, pending: Pending) {
-        let chord = pending
-            .programmed()
-            .filter(|p| p.xyz_only)
-            .map_or(Chord::BREAK, |p| Chord::of(p, self.chords.back()));
+        let line = pending.programmed().filter(|p| p.xyz_only);
+        let chord = line.map_or(Chord::BREAK, |p| Chord::of(p, self.chords.back()));
+        if let Some(ahead) = &mut self.ahead {
+            ahead.push(match line {
+                Some(&line) => ahead::Move::Line {
+                    line,
+                    mode: pending.mode,
+                },
+                None => ahead::Move::Other,
+            });
+        }
         self.pending.push_back(pending);
         self.chords.push_back(chord);
         debug_assert_eq!(self.chords.len(), self.behind + self.pending.len());
     }
 
     /// The frame at the midpoint of the second waiting move on the curve
-    /// fitted through it and its neighbours ([`FitWindow::fit`]), when at
-    /// least [`FIT_MIN_SIDE`] lines on each side continue it without a
-    /// corner.
+    /// fitted through it and its neighbours ([`fitted_frame`]).
     fn fitted_mid(&self) -> Option<Frame> {
         let pb = self.pending.get(1)?.programmed().filter(|p| p.xyz_only)?;
-        let at = self.behind + 1;
-        let centre = &self.chords[at];
-        let side = self.fit_side(at);
-        if side < FIT_MIN_SIDE {
-            return None;
-        }
-        let mut window = FitWindow::new();
-        window.used = 2 * side + 1;
-        for (k, c) in self.chords.range(at - side..=at + side).enumerate() {
-            window.x[k] = c.station - centre.station;
-            for i in 0..3 {
-                window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
-            }
-        }
-        let mut frame = window.fit()?;
-        for i in 0..3 {
-            frame.point[i] += centre.midpoint[i];
-        }
-        frame.point[3..].copy_from_slice(&pb.line.start[3..]);
-        Some(frame)
-    }
-
-    /// How many chords a fit centred on the midpoint of chord `at` may
-    /// take on each side: as many as both sides have before a corner (a
-    /// bend over FIT_BEND), within FIT_REACH and FIT_TURN of the centre
-    /// (turn measured as |u − u_centre|, which bounds how far the curve
-    /// strays from a cubic there).
-    fn fit_side(&self, at: usize) -> usize {
-        let centre = &self.chords[at];
-        let within = |c: &Chord| {
-            (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
-                && centre.bend2(c) <= FIT_TURN * FIT_TURN
-        };
-        let mut after = 0;
-        for c in self.chords.range(at + 1..).take(FIT_SIDE) {
-            if c.corner || !within(c) {
-                break;
-            }
-            after += 1;
-        }
-        // A chord's `corner` is its bend to the one before it.
-        let mut side = 0;
-        let mut nearer = centre;
-        for c in self.chords.range(..at).rev().take(after) {
-            if nearer.corner || !within(c) {
-                break;
-            }
-            side += 1;
-            nearer = c;
-        }
-        side
+        fitted_frame(&self.chords, self.behind + 1, self.chords.len(), pb)
     }
 
     /// Curvature the path should have at the midpoint of `b`, a line whose
@@ -1589,26 +1669,7 @@ impl<'k> Planner<'k> {
         let PathMode::Blend { tolerance } = b.mode else {
             return None;
         };
-        let (u1, u2) = (&pa.direction, &pb.direction);
-        let bend = norm(&std::array::from_fn(|i| u2[i] - u1[i]));
-        let scale = corner_spread(bend) * (legs.0 + legs.1);
-        let control = Blend::hermite_control(
-            &start.point,
-            &start.tangent,
-            &start.curvature,
-            &end.point,
-            &end.tangent,
-            &end.curvature,
-            scale,
-        );
-        // A well-shaped blend moves at about `scale` per unit parameter
-        // everywhere; large end curvatures can fold it into a near-cusp,
-        // where |B′| all but vanishes and arc length stops being usable.
-        let min_speed = 0.3 * scale;
-        let (na, nb) = (Near::new(&pa.line), Near::new(&pb.line));
-        let proven = hull_bounds(&control, &na, &nb, tolerance, min_speed);
-        let near =
-            proven.all() || sampled_within(&control, &[na, nb], tolerance, min_speed, &proven);
+        let (control, near) = blend_near(pa, pb, tolerance, legs, start, end);
         (near && self.blend_in_reach(&control)).then_some(control)
     }
 
@@ -1629,24 +1690,31 @@ impl<'k> Planner<'k> {
             let both_lines = self.pending[0].is_line() && self.pending[1].is_line();
             // The midpoint of pending[1] depends on the lines after it, up
             // to FIT_SIDE of them (fewer if something else comes first).
-            let waiting = n < 2 + FIT_SIDE && self.pending.iter().skip(2).all(Pending::is_line);
+            // With a blend worker, LEAD more wait, so that it has them
+            // before they are needed (the decisions are the same: nothing
+            // looks further than FIT_SIDE lines ahead, nor past a move that
+            // is not a line).
+            let waiting = match self.ahead {
+                Some(_) => n < 2 + FIT_SIDE + ahead::LEAD,
+                None => n < 2 + FIT_SIDE && self.pending.iter().skip(2).all(Pending::is_line),
+            };
             if both_lines && waiting && !last {
                 return;
             }
             if !both_lines {
                 if let Some((legs, control, end)) = self.choose_arc_blend() {
-                    self.blend_corner(legs, control, end);
+                    self.blend_corner(legs, control, end, None);
                     continue;
                 }
             }
-            let Some((legs, control, mid)) = self.choose_blend(both_lines) else {
+            let Some((legs, control, mid, sampled)) = self.choose_blend(both_lines) else {
                 // No blend here, or none fits: stop (or go straight on) at
                 // the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
                 self.release_front(exit);
                 continue;
             };
-            self.blend_corner(legs, control, mid);
+            self.blend_corner(legs, control, mid, sampled);
         }
     }
 
@@ -1654,7 +1722,13 @@ impl<'k> Planner<'k> {
     /// the first, and emit the blend with control points `control` that
     /// joins them; the second keeps waiting, with `mid`, where the blend
     /// ends, for the blend after it if that one takes the rest of it.
-    fn blend_corner(&mut self, legs: (f64, f64), control: [Vec9; 6], mid: Frame) {
+    fn blend_corner(
+        &mut self,
+        legs: (f64, f64),
+        control: [Vec9; 6],
+        mid: Frame,
+        sampled: Option<(Blend, BlendExtremes)>,
+    ) {
         // Trim a and b in place: a waiting move is over a kilobyte, and
         // copies of them showed in profiles.
         let a = &mut self.pending[0];
@@ -1696,7 +1770,7 @@ impl<'k> Planner<'k> {
             SegmentKind::Feed
         };
         // The blend's table and what its limits need in one pass.
-        let (shape, extremes) = Blend::sampled(control);
+        let (shape, extremes) = sampled.unwrap_or_else(|| Blend::sampled(control));
         let mut blend =
             self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
         blend.feed = a_feed.min(b_feed);
@@ -1819,7 +1893,7 @@ impl<'k> Planner<'k> {
     /// The blend at the corner between the first two waiting moves, if they
     /// are lines (`both_lines`) to blend and one fits: its legs, control
     /// points and the curvature it ends with.
-    fn choose_blend(&self, both_lines: bool) -> Option<((f64, f64), [Vec9; 6], Frame)> {
+    fn choose_blend(&self, both_lines: bool) -> Option<Chosen> {
         let (a, b) = (&self.pending[0], &self.pending[1]);
         let mut legs = if both_lines {
             self.legs(a, b)?
@@ -1854,10 +1928,30 @@ impl<'k> Planner<'k> {
                 );
                 Some(mid)
             };
-            for mid in [self.fitted_mid(), vertices()].into_iter().flatten() {
+            // The blend worker's, if it made it from this start; it
+            // leaves the reach to be checked.
+            let worked = a_consumed
+                .then_some(self.ahead.as_ref())
+                .flatten()
+                .and_then(|ahead| ahead.take(self.released + 1, &start, legs, legs_bc));
+            if let Some(w) = worked {
+                // (`take` counts it only once the planner uses it.)
+                if let (Some(mid), Some(ab), Some(bc)) = (w.fit, w.ab, w.bc) {
+                    if self.blend_in_reach(&ab) && self.blend_in_reach(&bc) {
+                        return Some((legs, ab, mid, w.sampled));
+                    }
+                }
+            } else if let Some(mid) = self.fitted_mid() {
                 if let Some(bl) = self.blend_within(a, b, legs, &start, &mid) {
                     if self.blend_within(b, c, legs_bc, &mid, &c_start).is_some() {
-                        return Some((legs, bl, mid));
+                        return Some((legs, bl, mid, None));
+                    }
+                }
+            }
+            if let Some(mid) = vertices() {
+                if let Some(bl) = self.blend_within(a, b, legs, &start, &mid) {
+                    if self.blend_within(b, c, legs_bc, &mid, &c_start).is_some() {
+                        return Some((legs, bl, mid, None));
                     }
                 }
             }
@@ -1877,7 +1971,7 @@ impl<'k> Planner<'k> {
             }
         }
         let mid = end(legs)?;
-        found.map(|control| (legs, control, mid))
+        found.map(|control| (legs, control, mid, None))
     }
 
     /// Speed cap where `a` meets `b` without a blend: straight or tangent

@@ -1,0 +1,685 @@
+//! Dense-curve blends worked out ahead of the planner, on a second thread.
+//!
+//! On a dense curve most of the planner's time per line goes into the
+//! blend at its start: the curve fit at the line's midpoint, the proofs
+//! that the blend stays within the tolerance, and the blend's sampled
+//! table. All of that is a function of the programmed lines alone, once
+//! one thing is assumed: that the blend before it ended at the previous
+//! line's fitted midpoint, as it does all along a smooth curve. So a worker
+//! thread can work it out while the planner is still busy with earlier
+//! lines, a few hundred lines behind.
+//!
+//! The planner takes a worked-out blend only after checking, bit for bit,
+//! that the assumptions it was made under are what actually happened, and
+//! works out everything else itself, including any blend the worker has
+//! not reached yet. Whether the worker kept up, fell behind or is off, the
+//! plan is the same to the last bit (the test
+//! `the_blend_worker_changes_no_plan_bit` holds it to that).
+//!
+//! The worker never checks the machine's reach (that needs the
+//! kinematics, which belong to the planner's thread); the planner does
+//! that for every blend it takes.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::{blend_legs, blend_near, fitted_frame, Chord, PathMode, Programmed, FIT_SIDE};
+use crate::path::{Blend, BlendExtremes, Frame, Vec9};
+
+/// How many more lines the planner holds back while the worker runs, so
+/// that the worker has them before the planner needs their blends.
+pub(super) const LEAD: usize = 128;
+
+/// Moves handed over at once (one lock per batch, not per move).
+const BATCH: usize = 16;
+
+/// How far ahead of the planner the worker goes on when the planner has
+/// caught up with it: the planner works out the junctions in between.
+const JUMP: u64 = 8;
+
+/// Junctions kept worked out: more than the lead, so that the worker's
+/// results are not overwritten before the planner reaches them.
+const SLOTS: usize = 2 * LEAD;
+
+/// How long the worker keeps looking for more moves before it sleeps:
+/// long enough to span the planner's work between two batches, so that
+/// a busy planner never pays for waking it.
+const SPIN: Duration = Duration::from_micros(200);
+
+/// A waiting move as the worker sees it. (Not boxed: nearly all are
+/// lines, and they travel in batches.)
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Move {
+    /// A line in X Y Z only, with the path mode it was programmed in.
+    Line { line: Programmed, mode: PathMode },
+    /// Anything else (an arc, or a line that moves other axes): it ends
+    /// the polyline the curve fit sees.
+    Other,
+}
+
+/// What the planner hands the worker.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+enum Input {
+    Move(Move),
+    /// The planner released every waiting move (program end, a dwell...):
+    /// the blends up to here were decided seeing no move after this.
+    Flush,
+}
+
+/// The blend at the vertex between lines `a` and `b` (the move with the
+/// junction's index) as the planner's dense-curve branch would work it
+/// out, if the blend before it ended at `start`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Speculation {
+    /// Where the blend before it ended: `a`'s fitted midpoint.
+    start: Frame,
+    /// Legs at a's end and b's start, and at b's end and c's start.
+    legs: (f64, f64),
+    legs_bc: (f64, f64),
+    /// The fitted frame at b's midpoint.
+    pub fit: Option<Frame>,
+    /// The blend from `start` to `fit`, if it is within b's tolerance.
+    pub ab: Option<[Vec9; 6]>,
+    /// The blend from `fit` onto c, if `ab` is within tolerance and this
+    /// is too.
+    pub bc: Option<[Vec9; 6]>,
+    /// `ab` sampled ([`Blend::sampled`]), if both are within tolerance.
+    pub sampled: Option<(Blend, BlendExtremes)>,
+}
+
+/// One junction's place in the ring of worked-out blends.
+struct Slot {
+    /// The junction it holds (`u64::MAX`: none yet).
+    index: u64,
+    /// Its blend, or `None` when the planner claimed it first.
+    speculation: Option<Speculation>,
+}
+
+struct Inbox {
+    inputs: Vec<Input>,
+    sleeping: bool,
+    closed: bool,
+}
+
+/// What the planner and the worker share.
+struct Shared {
+    inbox: Mutex<Inbox>,
+    wake: Condvar,
+    /// Moves handed over so far: the worker watches it before sleeping.
+    handed: AtomicU64,
+    /// The junction the planner is deciding now: the worker skips it and
+    /// everything before it.
+    deciding: AtomicU64,
+    /// The planner is gone: stop.
+    closed: AtomicBool,
+    /// The next junction the worker looks at: it has passed every one
+    /// before.
+    passed: AtomicU64,
+    /// The planner waits for the worker's blends and the worker never
+    /// leaves junctions to the planner, so that every blend the worker can
+    /// make is taken (tests).
+    patient: bool,
+    slots: Box<[Mutex<Slot>]>,
+}
+
+impl Shared {
+    fn slot(&self, index: u64) -> MutexGuard<'_, Slot> {
+        // A panic while a slot was locked leaves it as it was or with a
+        // finished speculation: both are safe to go on with.
+        let slot = &self.slots[(index % SLOTS as u64) as usize];
+        slot.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn inbox(&self) -> MutexGuard<'_, Inbox> {
+        self.inbox
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+/// The planner's end of the worker: hands it moves, takes its blends.
+pub(super) struct Ahead {
+    shared: Arc<Shared>,
+    worker: Option<JoinHandle<()>>,
+    batch: Vec<Input>,
+    /// Moves handed over so far, batched or not.
+    pushed: u64,
+    /// Blends taken from the worker.
+    pub(super) taken: std::cell::Cell<u64>,
+    /// Blends the planner looked for.
+    pub(super) looked: std::cell::Cell<u64>,
+}
+
+impl Ahead {
+    /// Start a worker; `None` if no thread can be started (the planner
+    /// then works everything out itself).
+    pub(super) fn start() -> Option<Ahead> {
+        Ahead::spawn(false)
+    }
+
+    /// A worker whose every blend the planner waits for and takes
+    /// (tests: the plan must still be the same to the last bit).
+    #[cfg(test)]
+    pub(super) fn start_patient() -> Option<Ahead> {
+        Ahead::spawn(true)
+    }
+
+    fn spawn(patient: bool) -> Option<Ahead> {
+        let shared = Arc::new(Shared {
+            inbox: Mutex::new(Inbox {
+                inputs: Vec::with_capacity(4 * BATCH),
+                sleeping: false,
+                closed: false,
+            }),
+            wake: Condvar::new(),
+            handed: AtomicU64::new(0),
+            deciding: AtomicU64::new(0),
+            closed: AtomicBool::new(false),
+            passed: AtomicU64::new(0),
+            patient,
+            slots: (0..SLOTS)
+                .map(|_| {
+                    Mutex::new(Slot {
+                        index: u64::MAX,
+                        speculation: None,
+                    })
+                })
+                .collect(),
+        });
+        let theirs = Arc::clone(&shared);
+        let worker = std::thread::Builder::new()
+            .name("kerf-blends".into())
+            .spawn(move || Worker::new(theirs).run())
+            .ok()?;
+        Some(Ahead {
+            shared,
+            worker: Some(worker),
+            batch: Vec::with_capacity(BATCH + 1),
+            pushed: 0,
+            taken: std::cell::Cell::new(0),
+            looked: std::cell::Cell::new(0),
+        })
+    }
+
+    /// The planner queued `m` (every waiting move, in order).
+    pub(super) fn push(&mut self, m: Move) {
+        self.batch.push(Input::Move(m));
+        self.pushed += 1;
+        if self.batch.len() >= BATCH {
+            self.hand_over();
+        }
+    }
+
+    /// The planner is about to release every waiting move.
+    pub(super) fn flush(&mut self) {
+        self.batch.push(Input::Flush);
+        self.hand_over();
+    }
+
+    fn hand_over(&mut self) {
+        let sleeping = {
+            let mut inbox = self.shared.inbox();
+            inbox.inputs.append(&mut self.batch);
+            inbox.sleeping
+        };
+        self.shared.handed.store(self.pushed, Ordering::Release);
+        if sleeping {
+            self.shared.wake.notify_one();
+        }
+    }
+
+    /// The worked-out blend at junction `index` (the index of its second
+    /// line among all moves queued), if the worker has it and made it
+    /// from this `start` with these legs; otherwise the junction is
+    /// claimed, so the worker leaves it, and `None` says to work it out.
+    /// Waits if the worker is working on it now.
+    pub(super) fn take(
+        &self,
+        index: u64,
+        start: &Frame,
+        legs: (f64, f64),
+        legs_bc: (f64, f64),
+    ) -> Option<Speculation> {
+        self.looked.set(self.looked.get() + 1);
+        let mut slot = self.shared.slot(index);
+        if self.shared.patient {
+            // The worker has every move it needs (the planner holds back
+            // LEAD moves, more than a batch, or has flushed).
+            while slot.index != index && self.shared.passed.load(Ordering::Acquire) <= index {
+                drop(slot);
+                std::thread::yield_now();
+                slot = self.shared.slot(index);
+            }
+        } else {
+            self.shared.deciding.store(index, Ordering::Relaxed);
+        }
+        if slot.index != index {
+            slot.index = index;
+            slot.speculation = None;
+            return None;
+        }
+        let s = slot.speculation.take()?;
+        let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        let frame_same = |a: &Frame, b: &Frame| {
+            same(&a.point, &b.point)
+                && same(&a.tangent, &b.tangent)
+                && same(&a.curvature, &b.curvature)
+        };
+        let legs_same = same(
+            &[s.legs.0, s.legs.1, s.legs_bc.0, s.legs_bc.1],
+            &[legs.0, legs.1, legs_bc.0, legs_bc.1],
+        );
+        if !(legs_same && frame_same(&s.start, start)) {
+            return None;
+        }
+        self.taken.set(self.taken.get() + 1);
+        Some(s)
+    }
+}
+
+impl Drop for Ahead {
+    fn drop(&mut self) {
+        self.shared.closed.store(true, Ordering::Relaxed);
+        self.shared.inbox().closed = true;
+        self.shared.wake.notify_one();
+        if let Some(worker) = self.worker.take() {
+            // A worker that panicked has nothing left to clean up.
+            let _ = worker.join();
+        }
+    }
+}
+
+/// The worker's copy of the waiting moves and their chords.
+struct Worker {
+    shared: Arc<Shared>,
+    /// Moves from index `first` on, with their chords.
+    moves: VecDeque<Move>,
+    chords: VecDeque<Chord>,
+    first: u64,
+    /// Where the planner flushed: the number of moves queued then.
+    flushes: VecDeque<u64>,
+    /// The next junction to look at.
+    next: u64,
+    /// The last fitted frame worked out, with its move's index.
+    last_fit: Option<(u64, Option<Frame>)>,
+}
+
+impl Worker {
+    fn new(shared: Arc<Shared>) -> Worker {
+        Worker {
+            shared,
+            moves: VecDeque::new(),
+            chords: VecDeque::new(),
+            first: 0,
+            flushes: VecDeque::new(),
+            next: 1,
+            last_fit: None,
+        }
+    }
+
+    fn run(mut self) {
+        let mut inputs = Vec::with_capacity(4 * BATCH);
+        loop {
+            {
+                let mut inbox = self.shared.inbox();
+                if inbox.inputs.is_empty() && !inbox.closed {
+                    drop(inbox);
+                    self.spin();
+                    inbox = self.shared.inbox();
+                }
+                while inbox.inputs.is_empty() && !inbox.closed {
+                    inbox.sleeping = true;
+                    inbox = self
+                        .shared
+                        .wake
+                        .wait(inbox)
+                        .unwrap_or_else(|poisoned| poisoned.into_inner());
+                }
+                inbox.sleeping = false;
+                if inbox.closed {
+                    return;
+                }
+                std::mem::swap(&mut inputs, &mut inbox.inputs);
+            }
+            for input in inputs.drain(..) {
+                self.receive(input);
+            }
+            self.work();
+        }
+    }
+
+    /// Look for more moves for a while before sleeping.
+    fn spin(&self) {
+        let seen = self.shared.handed.load(Ordering::Acquire);
+        let since = Instant::now();
+        while since.elapsed() < SPIN {
+            for _ in 0..64 {
+                std::hint::spin_loop();
+            }
+            if self.shared.handed.load(Ordering::Acquire) != seen {
+                return;
+            }
+        }
+    }
+
+    fn receive(&mut self, input: Input) {
+        match input {
+            Input::Move(m) => {
+                let chord = match &m {
+                    Move::Line { line, .. } => Chord::of(line, self.chords.back()),
+                    Move::Other => Chord::BREAK,
+                };
+                self.moves.push_back(m);
+                self.chords.push_back(chord);
+            }
+            Input::Flush => self.flushes.push_back(self.first + self.moves.len() as u64),
+        }
+    }
+
+    /// Work out every junction whose lines are all here, in order.
+    fn work(&mut self) {
+        loop {
+            let total = self.first + self.moves.len() as u64;
+            let j = self.next;
+            while self.flushes.front().is_some_and(|&f| f <= j) {
+                self.flushes.pop_front();
+            }
+            // The planner decides junction j seeing the moves up to its
+            // next flush, or at least FIT_SIDE after j (the fit sees no
+            // further, nor past a move that is not a line).
+            let end = match self.flushes.front() {
+                Some(&flush) => flush,
+                None => {
+                    let window = (j + 1..total.min(j + 1 + FIT_SIDE as u64))
+                        .any(|k| self.chords[(k - self.first) as usize].is_break());
+                    if total < j + 1 + FIT_SIDE as u64 && !window {
+                        return;
+                    }
+                    total
+                }
+            };
+            let deciding = self.shared.deciding.load(Ordering::Relaxed);
+            if deciding > 0 && j <= deciding + 1 && !self.shared.patient {
+                // The planner has caught up: it would wait for this one.
+                // Leave it the next few and work further on, so that both
+                // work at once.
+                self.next = deciding + JUMP;
+                continue;
+            }
+            if j + 1 < end {
+                self.junction(j, end);
+            }
+            self.next += 1;
+            self.shared.passed.store(self.next, Ordering::Release);
+            // Keep what the fits of the next junctions may look back on.
+            while self.first + (FIT_SIDE as u64 + 2) < self.next {
+                self.moves.pop_front();
+                self.chords.pop_front();
+                self.first += 1;
+            }
+            if self.shared.closed.load(Ordering::Relaxed) {
+                return;
+            }
+        }
+    }
+
+    /// The fitted frame at move `index`'s midpoint, seeing moves before `end`.
+    /// (Fields one by one, so that a slot can stay locked meanwhile.)
+    fn fit(
+        last_fit: &mut Option<(u64, Option<Frame>)>,
+        moves: &VecDeque<Move>,
+        chords: &VecDeque<Chord>,
+        first: u64,
+        index: u64,
+        end: u64,
+    ) -> Option<Frame> {
+        if let Some((at, fit)) = *last_fit {
+            if at == index {
+                return fit;
+            }
+        }
+        let Move::Line { line, .. } = &moves[(index - first) as usize] else {
+            return None;
+        };
+        let fit = fitted_frame(
+            chords,
+            (index - first) as usize,
+            (end - first) as usize,
+            line,
+        );
+        *last_fit = Some((index, fit));
+        fit
+    }
+
+    /// Work out junction `j` (moves j − 1, j and j + 1), seeing moves
+    /// before `end`, into its slot, unless the planner has claimed it.
+    fn junction(&mut self, j: u64, end: u64) {
+        let at = |k: u64| match self.moves[(k - self.first) as usize] {
+            Move::Line { line, mode } => Some((line, mode)),
+            Move::Other => None,
+        };
+        let (Some((a, _)), Some((b, b_mode)), Some((c, c_mode))) = (at(j - 1), at(j), at(j + 1))
+        else {
+            return;
+        };
+        let (PathMode::Blend { tolerance: tol_b }, PathMode::Blend { tolerance: tol_c }) =
+            (b_mode, c_mode)
+        else {
+            return;
+        };
+        let (Some(legs), Some(legs_bc)) = (blend_legs(&a, &b, b_mode), blend_legs(&b, &c, c_mode))
+        else {
+            return;
+        };
+        // The dense-curve branch: blends take whole halves of a and b.
+        let (half_a, half_b) = (a.length / 2.0, b.length / 2.0);
+        if legs.0 != half_a || legs.1 != half_b || legs_bc.0 != half_b {
+            return;
+        }
+        // The blend before ended at a's fitted midpoint, as the planner
+        // keeps it: X Y Z from the fit, the other axes where the trimmed
+        // line starts.
+        // (Should the planner have decided a's blend seeing other moves,
+        // the start differs and it works this one out itself.)
+        let (moves, chords, first) = (&self.moves, &self.chords, self.first);
+        let Some(fit_a) = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end) else {
+            return;
+        };
+        let xyz = |v: &Vec9, rest: &dyn Fn(usize) -> f64| -> Vec9 {
+            std::array::from_fn(|i| if i < 3 { v[i] } else { rest(i) })
+        };
+        let start = Frame {
+            point: xyz(&fit_a.point, &|i| a.line.start[i] + half_a * a.direction[i]),
+            tangent: xyz(&fit_a.tangent, &|_| 0.0),
+            curvature: xyz(&fit_a.curvature, &|_| 0.0),
+        };
+        let mut slot = self.shared.slot(j);
+        if slot.index == j {
+            // The planner got here first.
+            return;
+        }
+        let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
+        let mut s = Speculation {
+            start,
+            legs,
+            legs_bc,
+            fit,
+            ab: None,
+            bc: None,
+            sampled: None,
+        };
+        if let Some(mid) = &fit {
+            let (ab, near) = blend_near(&a, &b, tol_b, legs, &start, mid);
+            if near {
+                s.ab = Some(ab);
+                let c_start = c.frame_at(legs_bc.1, false);
+                let (bc, near) = blend_near(&b, &c, tol_c, legs_bc, mid, &c_start);
+                if near {
+                    s.bc = Some(bc);
+                    s.sampled = Some(Blend::sampled(ab));
+                }
+            }
+        }
+        slot.index = j;
+        slot.speculation = Some(s);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Planner, PlannerConfig};
+    use super::Ahead;
+    use crate::testkit::{uniform, xyz};
+    use kerf_interp::{Interpreter, Position};
+    use std::fmt::Write;
+
+    /// How the planner gets its blends.
+    #[derive(Clone, Copy, Debug)]
+    enum Helper {
+        /// Works everything out itself.
+        None,
+        /// With the worker, as it ships.
+        Worker,
+        /// Waits for every blend the worker can make.
+        Patient,
+    }
+
+    /// Every segment of `text` planned with `helper`, as text that shows
+    /// every bit of every number, with how many blends the planner looked
+    /// for on dense curves and how many it took from the worker.
+    fn plan(text: &str, helper: Helper) -> (Vec<String>, u64, u64) {
+        let kins = xyz(200.0, 3000.0, 60_000.0);
+        let config = PlannerConfig {
+            blend_worker: !matches!(helper, Helper::None),
+            ..PlannerConfig::default()
+        };
+        let mut p = Planner::new(&kins, Position::ZERO, config);
+        if let Helper::Patient = helper {
+            p.ahead = Ahead::start_patient();
+        }
+        let mut out = Vec::new();
+        for c in Interpreter::from_text(text, "t.ngc", Position::ZERO) {
+            p.plan(&c.unwrap()).unwrap();
+            while let Some(s) = p.next_segment() {
+                out.push(format!("{s:?}"));
+            }
+        }
+        p.finish();
+        while let Some(s) = p.next_segment() {
+            out.push(format!("{s:?}"));
+        }
+        let (looked, taken) = p
+            .ahead
+            .as_ref()
+            .map_or((0, 0), |a| (a.looked.get(), a.taken.get()));
+        (out, looked, taken)
+    }
+
+    /// Dense CAM-like curves, rounded to 3 to 5 decimals, interrupted by
+    /// everything that changes what a blend sees: dwells (the planner
+    /// releases everything), arcs, rapids, sharp corners, path mode and
+    /// tolerance changes, and lines long enough to need no blend.
+    fn program(seed: u64, pieces: usize) -> String {
+        let mut r = uniform(seed);
+        let mut t = String::from("G21 G90 G64 P0.01 Q0 F2400\nG0 X0 Y0 Z0\nG1\n");
+        let (mut x, mut y) = (0.0f64, 0.0f64);
+        for _ in 0..pieces {
+            match (r() * 8.0) as u32 {
+                0 => t += "G4 P0.01\n",
+                1 => {
+                    x += 3.0;
+                    writeln!(t, "G2 X{x:.4} Y{y:.4} R2\nG1").unwrap();
+                }
+                2 => {
+                    x += 5.0 * (r() - 0.5);
+                    writeln!(t, "G0 X{x:.4} Y{y:.4}\nG1").unwrap();
+                }
+                3 => {
+                    y += 2.0;
+                    writeln!(t, "X{x:.4} Y{y:.4}").unwrap();
+                }
+                _ => {
+                    // Chords of a circle through the current point, mostly
+                    // blended, in one of the path modes.
+                    let n = 30 + (r() * 400.0) as usize;
+                    // (Q0: no collinear merge, which P alone implies; it
+                    // would merge most of the chords.)
+                    let mode = [
+                        "G64 P0.01 Q0",
+                        "G64 P0.005 Q0",
+                        "G64",
+                        "G64 P0.02",
+                        "G61",
+                        "G61.1",
+                    ];
+                    let pick = (r() * r() * mode.len() as f64) as usize;
+                    writeln!(t, "{}", mode[pick]).unwrap();
+
+                    let (radius, chord) = (2.0 + 15.0 * r(), 0.01 + 0.09 * r());
+                    let decimals = 3 + (r() * 3.0) as usize;
+                    let (cx, cy) = (x - radius, y);
+                    let turn = if r() < 0.5 { 1.0 } else { -1.0 };
+                    for k in 1..=n {
+                        let a = turn * k as f64 * chord / radius;
+                        x = cx + radius * a.cos();
+                        y = cy + radius * a.sin();
+                        writeln!(t, "X{x:.decimals$} Y{y:.decimals$}").unwrap();
+                    }
+                }
+            }
+        }
+        t + "M2\n"
+    }
+
+    #[test]
+    fn the_blend_worker_changes_no_plan_bit() {
+        // A spiral of 0.02 mm chords, to 5 decimals as CAM writes them,
+        // with a dwell halfway, then the random programs.
+        let mut spiral = String::from("G21 G90 G64 P0.01 Q0 F3000\nG0 X1 Y0\nG1\n");
+        let mut theta = 0.0f64;
+        for k in 0..4000 {
+            let r = 1.0 + 0.08 * theta;
+            theta += 0.02 / r;
+            let (x, y) = (r * theta.cos(), r * theta.sin());
+            writeln!(spiral, "X{x:.5} Y{y:.5}").unwrap();
+            if k == 2000 {
+                spiral += "G4 P0.5\n";
+            }
+        }
+        spiral += "M2\n";
+        let programs = [(spiral, 0.99)]
+            .into_iter()
+            .chain([3, 17, 29].map(|seed| (program(seed, 60), 0.95)));
+        for (seed, (text, share)) in programs.enumerate() {
+            let (alone, _, _) = plan(&text, Helper::None);
+            for helper in [Helper::Patient, Helper::Worker] {
+                let (helped, looked, taken) = plan(&text, helper);
+                assert_eq!(
+                    alone.len(),
+                    helped.len(),
+                    "program {seed} {helper:?}: segment count"
+                );
+                for (k, (a, h)) in alone.iter().zip(&helped).enumerate() {
+                    assert_eq!(a, h, "program {seed} {helper:?}: segment {k} differs");
+                }
+                // The comparison means something only if the planner took
+                // the worker's blends. A patient planner takes every one
+                // made from where the blend before really ended: nearly
+                // all (the rest follow a blend whose fit failed, and the
+                // planner's fallback ended elsewhere).
+                if let Helper::Patient = helper {
+                    assert!(looked > 1000, "program {seed}: {looked} dense-curve blends");
+                    assert!(
+                        taken as f64 >= share * looked as f64,
+                        "program {seed}: took {taken} of {looked}"
+                    );
+                }
+            }
+        }
+    }
+}
