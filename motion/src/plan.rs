@@ -13,6 +13,8 @@ use std::collections::VecDeque;
 
 mod ahead;
 
+use ahead::{Speculation, Worked};
+
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
 use crate::kinematics::{Kinematics, Limits, LIMIT_SLACK, MAX_JOINTS};
@@ -1915,6 +1917,13 @@ impl<'k> Planner<'k> {
             on_line(a, legs.0, true)?
         };
         let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
+        // The blend worker's, if it made it from this start: on a dense
+        // curve (both consumed) or at a corner (neither). It leaves the
+        // reach to be checked.
+        let worked = (a_consumed == b_consumed)
+            .then_some(self.ahead.as_ref())
+            .flatten()
+            .and_then(|ahead| ahead.take(self.released + 1, &start, legs, legs_bc));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
             let c_start = on_line(c, legs_bc.1, false)?;
             // The fitted curve's frame at b's midpoint, else b's midpoint
@@ -1928,17 +1937,15 @@ impl<'k> Planner<'k> {
                 );
                 Some(mid)
             };
-            // The blend worker's, if it made it from this start; it
-            // leaves the reach to be checked.
-            let worked = a_consumed
-                .then_some(self.ahead.as_ref())
-                .flatten()
-                .and_then(|ahead| ahead.take(self.released + 1, &start, legs, legs_bc));
-            if let Some(w) = worked {
-                // (`take` counts it only once the planner uses it.)
-                if let (Some(mid), Some(ab), Some(bc)) = (w.fit, w.ab, w.bc) {
+            if let Some(Speculation {
+                worked: Worked::Dense { fit, ab, bc },
+                sampled,
+                ..
+            }) = worked
+            {
+                if let (Some(mid), Some(ab), Some(bc)) = (fit, ab, bc) {
                     if self.blend_in_reach(&ab) && self.blend_in_reach(&bc) {
-                        return Some((legs, ab, mid, w.sampled));
+                        return Some((legs, ab, mid, sampled));
                     }
                 }
             } else if let Some(mid) = self.fitted_mid() {
@@ -1960,6 +1967,23 @@ impl<'k> Planner<'k> {
         // (a's midpoint is shared); otherwise shrink them until the blend
         // is within tolerance.
         let end = |legs: (f64, f64)| on_line(b, legs.1, false);
+        if let Some(Speculation {
+            worked: Worked::Corner { chosen },
+            sampled,
+            ..
+        }) = worked
+        {
+            match chosen {
+                // The first legs whose blend is within the tolerance, if
+                // in reach; else what comes after them is to be tried.
+                Some((legs, control)) if self.blend_in_reach(&control) => {
+                    return Some((legs, control, end(legs)?, sampled));
+                }
+                Some(_) => {}
+                // None of the legs gives a blend within the tolerance.
+                None => return None,
+            }
+        }
         let mut found = self.blend_within(a, b, legs, &start, &end(legs)?);
         if !a_consumed {
             for _ in 0..8 {

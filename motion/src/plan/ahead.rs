@@ -1,16 +1,18 @@
-//! Dense-curve blends worked out ahead of the planner, on a second thread.
+//! Blends worked out ahead of the planner, on a second thread.
 //!
-//! On a dense curve most of the planner's time per line goes into the
-//! blend at its start: the curve fit at the line's midpoint, the proofs
-//! that the blend stays within the tolerance, and the blend's sampled
-//! table. All of that is a function of the programmed lines alone, once
-//! one thing is assumed: that the blend before it ended at the previous
-//! line's fitted midpoint, as it does all along a smooth curve. So a worker
-//! thread can work it out while the planner is still busy with earlier
-//! lines, a few hundred lines behind.
+//! Most of the planner's time per line goes into blends: on a dense curve
+//! the fit at the line's midpoint, the proofs that the blends stay within
+//! the tolerance and the blend's sampled table; at a corner the proofs for
+//! each leg length tried, and the table. All of that is a function of the
+//! programmed lines alone once one thing is assumed about where the blend
+//! starts: at a corner on the line, a leg from its end; on a dense curve at
+//! the previous line's fitted midpoint, where the blend before ended all
+//! along a smooth curve. So a worker thread works blends out while the
+//! planner is still busy with earlier lines, a hundred or so lines ahead,
+//! and the two share the junctions (`worker_takes`).
 //!
 //! The planner takes a worked-out blend only after checking, bit for bit,
-//! that the assumptions it was made under are what actually happened, and
+//! that the start and legs it was made from are what the planner has, and
 //! works out everything else itself, including any blend the worker has
 //! not reached yet. Whether the worker kept up, fell behind or is off, the
 //! plan is the same to the last bit (the test
@@ -36,9 +38,16 @@ pub(super) const LEAD: usize = 128;
 /// Moves handed over at once (one lock per batch, not per move).
 const BATCH: usize = 16;
 
-/// How far ahead of the planner the worker goes on when the planner has
-/// caught up with it: the planner works out the junctions in between.
-const JUMP: u64 = 8;
+/// Whether junction `index` is the worker's to work out. The planner
+/// keeps one in every three: taking a worked-out blend costs it about a
+/// quarter of working one out, so both threads are about as busy and
+/// neither waits for the other (a 200,000-chord spiral: 1.04 M lines/s,
+/// against 0.96–1.03 M keeping one in two, two in five or one in four).
+/// Sharing by who gets there first had the planner catch up with the
+/// worker and wait for the blend it was on.
+pub(super) fn worker_takes(index: u64) -> bool {
+    index % 3 < 2
+}
 
 /// Junctions kept worked out: more than the lead, so that the worker's
 /// results are not overwritten before the planner reaches them.
@@ -72,24 +81,43 @@ enum Input {
 }
 
 /// The blend at the vertex between lines `a` and `b` (the move with the
-/// junction's index) as the planner's dense-curve branch would work it
-/// out, if the blend before it ended at `start`.
+/// junction's index, `c` the one after) as the planner would work it out
+/// from `start` with these legs, but for the machine's reach.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Speculation {
-    /// Where the blend before it ended: `a`'s fitted midpoint.
+    /// Where the blend starts on `a`: `a`'s fitted midpoint on a dense
+    /// curve (where the blend before it ended), else on the line.
     start: Frame,
     /// Legs at a's end and b's start, and at b's end and c's start.
     legs: (f64, f64),
-    legs_bc: (f64, f64),
-    /// The fitted frame at b's midpoint.
-    pub fit: Option<Frame>,
-    /// The blend from `start` to `fit`, if it is within b's tolerance.
-    pub ab: Option<[Vec9; 6]>,
-    /// The blend from `fit` onto c, if `ab` is within tolerance and this
-    /// is too.
-    pub bc: Option<[Vec9; 6]>,
-    /// `ab` sampled ([`Blend::sampled`]), if both are within tolerance.
+    legs_bc: Option<(f64, f64)>,
+    pub worked: Worked,
+    /// The chosen blend sampled ([`Blend::sampled`]), if there is one.
     pub sampled: Option<(Blend, BlendExtremes)>,
+}
+
+/// What the worker worked out at a junction, by the planner's branch.
+/// (Not boxed: it lives in a slot of a ring made once.)
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Worked {
+    /// On a dense curve (blends take the whole halves of a and b).
+    Dense {
+        /// The fitted frame at b's midpoint.
+        fit: Option<Frame>,
+        /// The blend from `start` to `fit`, if it is within b's
+        /// tolerance.
+        ab: Option<[Vec9; 6]>,
+        /// The blend from `fit` onto c, if `ab` is within tolerance and
+        /// this is too.
+        bc: Option<[Vec9; 6]>,
+    },
+    /// At a corner (neither a's end nor b's start is a whole half): the
+    /// first of the legs, shrinking by 0.7 from the tolerance's, whose
+    /// blend is within b's tolerance, with its control points.
+    Corner {
+        chosen: Option<((f64, f64), [Vec9; 6])>,
+    },
 }
 
 /// One junction's place in the ring of worked-out blends.
@@ -243,10 +271,26 @@ impl Ahead {
         index: u64,
         start: &Frame,
         legs: (f64, f64),
-        legs_bc: (f64, f64),
+        legs_bc: Option<(f64, f64)>,
     ) -> Option<Speculation> {
         self.looked.set(self.looked.get() + 1);
-        let mut slot = self.shared.slot(index);
+        if !(self.shared.patient || worker_takes(index)) {
+            return None;
+        }
+        let mut slot = if self.shared.patient {
+            self.shared.slot(index)
+        } else {
+            // Not while the worker is on it: working it out costs about
+            // what waiting would, without the sleep and the wake-up.
+            match self.shared.slots[(index % SLOTS as u64) as usize].try_lock() {
+                Ok(slot) => slot,
+                Err(std::sync::TryLockError::Poisoned(p)) => p.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => {
+                    self.shared.deciding.store(index, Ordering::Relaxed);
+                    return None;
+                }
+            }
+        };
         if self.shared.patient {
             // The worker has every move it needs (the planner holds back
             // LEAD moves, more than a batch, or has flushed).
@@ -270,10 +314,13 @@ impl Ahead {
                 && same(&a.tangent, &b.tangent)
                 && same(&a.curvature, &b.curvature)
         };
-        let legs_same = same(
-            &[s.legs.0, s.legs.1, s.legs_bc.0, s.legs_bc.1],
-            &[legs.0, legs.1, legs_bc.0, legs_bc.1],
-        );
+        let pair = |l: Option<(f64, f64)>| l.map(|(x, y)| [x, y]);
+        let legs_same = same(&[s.legs.0, s.legs.1], &[legs.0, legs.1])
+            && match (pair(s.legs_bc), pair(legs_bc)) {
+                (Some(x), Some(y)) => same(&x, &y),
+                (None, None) => true,
+                _ => false,
+            };
         if !(legs_same && frame_same(&s.start, start)) {
             return None;
         }
@@ -305,6 +352,8 @@ struct Worker {
     flushes: VecDeque<u64>,
     /// The next junction to look at.
     next: u64,
+    /// The last move that is not a line.
+    last_break: Option<u64>,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
 }
@@ -318,6 +367,7 @@ impl Worker {
             first: 0,
             flushes: VecDeque::new(),
             next: 1,
+            last_break: None,
             last_fit: None,
         }
     }
@@ -372,7 +422,10 @@ impl Worker {
             Input::Move(m) => {
                 let chord = match &m {
                     Move::Line { line, .. } => Chord::of(line, self.chords.back()),
-                    Move::Other => Chord::BREAK,
+                    Move::Other => {
+                        self.last_break = Some(self.first + self.moves.len() as u64);
+                        Chord::BREAK
+                    }
                 };
                 self.moves.push_back(m);
                 self.chords.push_back(chord);
@@ -395,23 +448,17 @@ impl Worker {
             let end = match self.flushes.front() {
                 Some(&flush) => flush,
                 None => {
-                    let window = (j + 1..total.min(j + 1 + FIT_SIDE as u64))
-                        .any(|k| self.chords[(k - self.first) as usize].is_break());
-                    if total < j + 1 + FIT_SIDE as u64 && !window {
+                    let broken = self.last_break.is_some_and(|k| k > j);
+                    if total < j + 1 + FIT_SIDE as u64 && !broken {
                         return;
                     }
                     total
                 }
             };
-            let deciding = self.shared.deciding.load(Ordering::Relaxed);
-            if deciding > 0 && j <= deciding + 1 && !self.shared.patient {
-                // The planner has caught up: it would wait for this one.
-                // Leave it the next few and work further on, so that both
-                // work at once.
-                self.next = deciding + JUMP;
-                continue;
-            }
-            if j + 1 < end {
+            // Junctions the planner has passed, or keeps for itself, are
+            // left.
+            let passed = j <= self.shared.deciding.load(Ordering::Relaxed);
+            if j + 1 < end && !passed && (self.shared.patient || worker_takes(j)) {
                 self.junction(j, end);
             }
             self.next += 1;
@@ -463,65 +510,94 @@ impl Worker {
             Move::Line { line, mode } => Some((line, mode)),
             Move::Other => None,
         };
-        let (Some((a, _)), Some((b, b_mode)), Some((c, c_mode))) = (at(j - 1), at(j), at(j + 1))
-        else {
+        let (Some((a, _)), Some((b, b_mode))) = (at(j - 1), at(j)) else {
             return;
         };
-        let (PathMode::Blend { tolerance: tol_b }, PathMode::Blend { tolerance: tol_c }) =
-            (b_mode, c_mode)
-        else {
+        let PathMode::Blend { tolerance } = b_mode else {
             return;
         };
-        let (Some(legs), Some(legs_bc)) = (blend_legs(&a, &b, b_mode), blend_legs(&b, &c, c_mode))
-        else {
+        let Some(legs) = blend_legs(&a, &b, b_mode) else {
             return;
         };
-        // The dense-curve branch: blends take whole halves of a and b.
+        let c = at(j + 1);
+        let legs_bc = c.and_then(|(c, c_mode)| blend_legs(&b, &c, c_mode));
+        // The planner's branches (`Planner::choose_blend`): a dense curve
+        // where blends take whole halves of a and b, a corner where they
+        // take neither. Between the two, where the blend starts depends on
+        // the blend before, which the planner decides with the reach.
         let (half_a, half_b) = (a.length / 2.0, b.length / 2.0);
-        if legs.0 != half_a || legs.1 != half_b || legs_bc.0 != half_b {
-            return;
-        }
-        // The blend before ended at a's fitted midpoint, as the planner
-        // keeps it: X Y Z from the fit, the other axes where the trimmed
-        // line starts.
-        // (Should the planner have decided a's blend seeing other moves,
-        // the start differs and it works this one out itself.)
+        let b_whole = legs.1 == half_b && legs_bc.is_some_and(|l| l.0 == half_b);
+        let a_whole = legs.0 == half_a;
         let (moves, chords, first) = (&self.moves, &self.chords, self.first);
-        let Some(fit_a) = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end) else {
+        let start = if a_whole && b_whole {
+            // The blend before ended at a's fitted midpoint, as the planner
+            // keeps it: X Y Z from the fit, the other axes where the
+            // trimmed line starts. (Had the planner decided a's blend
+            // seeing other moves, or with another frame, the start differs
+            // and it works this one out itself.)
+            let Some(fit_a) = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end)
+            else {
+                return;
+            };
+            let xyz = |v: &Vec9, rest: &dyn Fn(usize) -> f64| -> Vec9 {
+                std::array::from_fn(|i| if i < 3 { v[i] } else { rest(i) })
+            };
+            Frame {
+                point: xyz(&fit_a.point, &|i| a.line.start[i] + half_a * a.direction[i]),
+                tangent: xyz(&fit_a.tangent, &|_| 0.0),
+                curvature: xyz(&fit_a.curvature, &|_| 0.0),
+            }
+        } else if !a_whole && !b_whole {
+            a.frame_at(legs.0, true)
+        } else {
             return;
-        };
-        let xyz = |v: &Vec9, rest: &dyn Fn(usize) -> f64| -> Vec9 {
-            std::array::from_fn(|i| if i < 3 { v[i] } else { rest(i) })
-        };
-        let start = Frame {
-            point: xyz(&fit_a.point, &|i| a.line.start[i] + half_a * a.direction[i]),
-            tangent: xyz(&fit_a.tangent, &|_| 0.0),
-            curvature: xyz(&fit_a.curvature, &|_| 0.0),
         };
         let mut slot = self.shared.slot(j);
         if slot.index == j {
             // The planner got here first.
             return;
         }
-        let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
         let mut s = Speculation {
             start,
             legs,
             legs_bc,
-            fit,
-            ab: None,
-            bc: None,
+            worked: Worked::Corner { chosen: None },
             sampled: None,
         };
-        if let Some(mid) = &fit {
-            let (ab, near) = blend_near(&a, &b, tol_b, legs, &start, mid);
-            if near {
-                s.ab = Some(ab);
-                let c_start = c.frame_at(legs_bc.1, false);
-                let (bc, near) = blend_near(&b, &c, tol_c, legs_bc, mid, &c_start);
+        if let (true, Some((c, c_mode)), Some(legs_bc)) = (a_whole, c, legs_bc) {
+            let PathMode::Blend { tolerance: tol_c } = c_mode else {
+                return;
+            };
+            let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
+            let (mut ab, mut bc) = (None, None);
+            if let Some(mid) = &fit {
+                let (control, near) = blend_near(&a, &b, tolerance, legs, &start, mid);
                 if near {
-                    s.bc = Some(bc);
-                    s.sampled = Some(Blend::sampled(ab));
+                    ab = Some(control);
+                    let c_start = c.frame_at(legs_bc.1, false);
+                    let (control, near) = blend_near(&b, &c, tol_c, legs_bc, mid, &c_start);
+                    if near {
+                        bc = Some(control);
+                        s.sampled = ab.map(Blend::sampled);
+                    }
+                }
+            }
+            s.worked = Worked::Dense { fit, ab, bc };
+        } else {
+            // The planner's corner: the tolerance's legs, then shorter.
+            let mut legs = legs;
+            for k in 0..9 {
+                if k > 0 {
+                    legs = (legs.0 * 0.7, legs.1 * 0.7);
+                }
+                let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
+                let (control, near) = blend_near(&a, &b, tolerance, legs, &from, &to);
+                if near {
+                    s.worked = Worked::Corner {
+                        chosen: Some((legs, control)),
+                    };
+                    s.sampled = Some(Blend::sampled(control));
+                    break;
                 }
             }
         }
@@ -589,7 +665,7 @@ mod tests {
         let mut t = String::from("G21 G90 G64 P0.01 Q0 F2400\nG0 X0 Y0 Z0\nG1\n");
         let (mut x, mut y) = (0.0f64, 0.0f64);
         for _ in 0..pieces {
-            match (r() * 8.0) as u32 {
+            match (r() * 9.0) as u32 {
                 0 => t += "G4 P0.01\n",
                 1 => {
                     x += 3.0;
@@ -598,6 +674,23 @@ mod tests {
                 2 => {
                     x += 5.0 * (r() - 0.5);
                     writeln!(t, "G0 X{x:.4} Y{y:.4}\nG1").unwrap();
+                }
+                7 => {
+                    // A polyline along and off the edge of the travel (X
+                    // 1000): corners, some of whose blends would leave it.
+                    writeln!(t, "G0 X1000 Y{y:.4}\nG1").unwrap();
+                    x = 1000.0;
+                    for _ in 0..(5 + (r() * 40.0) as usize) {
+                        y += 0.05 + 2.0 * r();
+                        x = if x == 1000.0 && r() < 0.7 {
+                            1000.0 - 3.0 * r()
+                        } else {
+                            1000.0
+                        };
+                        writeln!(t, "X{x:.4} Y{y:.4}").unwrap();
+                    }
+                    x = 900.0;
+                    writeln!(t, "G0 X{x:.4}\nG1").unwrap();
                 }
                 3 => {
                     y += 2.0;
