@@ -264,8 +264,8 @@ impl Ahead {
     /// The worked-out blend at junction `index` (the index of its second
     /// line among all moves queued), if the worker has it and made it
     /// from this `start` with these legs; otherwise the junction is
-    /// claimed, so the worker leaves it, and `None` says to work it out.
-    /// Waits if the worker is working on it now.
+    /// claimed, so the worker leaves it, and `None` says to work it out
+    /// (also when the worker is on it now: no waiting, unless patient).
     pub(super) fn take(
         &self,
         index: u64,
