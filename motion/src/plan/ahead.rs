@@ -131,7 +131,6 @@ struct Slot {
 struct Inbox {
     inputs: Vec<Input>,
     sleeping: bool,
-    closed: bool,
 }
 
 /// What the planner and the worker share.
@@ -143,7 +142,9 @@ struct Shared {
     /// The junction the planner is deciding now: the worker skips it and
     /// everything before it.
     deciding: AtomicU64,
-    /// The planner is gone: stop.
+    /// The planner is gone: stop. (Set before the inbox is locked to wake
+    /// the worker, and read under that lock before it sleeps, so the
+    /// wake-up is not lost.)
     closed: AtomicBool,
     /// The next junction the worker looks at: it has passed every one
     /// before.
@@ -156,11 +157,20 @@ struct Shared {
 }
 
 impl Shared {
+    fn slot_of(&self, index: u64) -> &Mutex<Slot> {
+        &self.slots[(index % SLOTS as u64) as usize]
+    }
+
     fn slot(&self, index: u64) -> MutexGuard<'_, Slot> {
         // A panic while a slot was locked leaves it as it was or with a
         // finished speculation: both are safe to go on with.
-        let slot = &self.slots[(index % SLOTS as u64) as usize];
-        slot.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        self.slot_of(index)
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    fn is_closed(&self) -> bool {
+        self.closed.load(Ordering::Relaxed)
     }
 
     fn inbox(&self) -> MutexGuard<'_, Inbox> {
@@ -202,7 +212,6 @@ impl Ahead {
             inbox: Mutex::new(Inbox {
                 inputs: Vec::with_capacity(4 * BATCH),
                 sleeping: false,
-                closed: false,
             }),
             wake: Condvar::new(),
             handed: AtomicU64::new(0),
@@ -282,7 +291,7 @@ impl Ahead {
         } else {
             // Not while the worker is on it: working it out costs about
             // what waiting would, without the sleep and the wake-up.
-            match self.shared.slots[(index % SLOTS as u64) as usize].try_lock() {
+            match self.shared.slot_of(index).try_lock() {
                 Ok(slot) => slot,
                 Err(std::sync::TryLockError::Poisoned(p)) => p.into_inner(),
                 Err(std::sync::TryLockError::WouldBlock) => {
@@ -332,7 +341,7 @@ impl Ahead {
 impl Drop for Ahead {
     fn drop(&mut self) {
         self.shared.closed.store(true, Ordering::Relaxed);
-        self.shared.inbox().closed = true;
+        drop(self.shared.inbox());
         self.shared.wake.notify_one();
         if let Some(worker) = self.worker.take() {
             // A worker that panicked has nothing left to clean up.
@@ -377,12 +386,12 @@ impl Worker {
         loop {
             {
                 let mut inbox = self.shared.inbox();
-                if inbox.inputs.is_empty() && !inbox.closed {
+                if inbox.inputs.is_empty() && !self.shared.is_closed() {
                     drop(inbox);
                     self.spin();
                     inbox = self.shared.inbox();
                 }
-                while inbox.inputs.is_empty() && !inbox.closed {
+                while inbox.inputs.is_empty() && !self.shared.is_closed() {
                     inbox.sleeping = true;
                     inbox = self
                         .shared
@@ -391,7 +400,7 @@ impl Worker {
                         .unwrap_or_else(|poisoned| poisoned.into_inner());
                 }
                 inbox.sleeping = false;
-                if inbox.closed {
+                if self.shared.is_closed() {
                     return;
                 }
                 std::mem::swap(&mut inputs, &mut inbox.inputs);
@@ -455,10 +464,10 @@ impl Worker {
                     total
                 }
             };
-            // Junctions the planner has passed, or keeps for itself, are
+            // Junctions the planner has decided, or keeps for itself, are
             // left.
-            let passed = j <= self.shared.deciding.load(Ordering::Relaxed);
-            if j + 1 < end && !passed && (self.shared.patient || worker_takes(j)) {
+            let decided = j <= self.shared.deciding.load(Ordering::Relaxed);
+            if j + 1 < end && !decided && (self.shared.patient || worker_takes(j)) {
                 self.junction(j, end);
             }
             self.next += 1;
@@ -469,7 +478,7 @@ impl Worker {
                 self.chords.pop_front();
                 self.first += 1;
             }
-            if self.shared.closed.load(Ordering::Relaxed) {
+            if self.shared.is_closed() {
                 return;
             }
         }
