@@ -1633,9 +1633,22 @@ impl<'k> Planner<'k> {
 
     /// The frame at the midpoint of the second waiting move on the curve
     /// fitted through it and its neighbours ([`fitted_frame`]).
+    ///
+    /// At the junctions the planner keeps, the blend worker has usually
+    /// fitted this already (the blend after starts there).
     fn fitted_mid(&self) -> Option<Frame> {
         let pb = self.pending.get(1)?.programmed().filter(|p| p.xyz_only)?;
-        fitted_frame(&self.chords, self.behind + 1, self.chords.len(), pb)
+        let (at, end) = (self.behind + 1, self.chords.len());
+        if let Some(ahead) = &self.ahead {
+            // Move indices among all moves queued: pending[1] is move
+            // released + 1, and the chords end where the waiting moves do.
+            let index = self.released + 1;
+            let window = ahead::window_end(index, index + (end - at) as u64);
+            if let Some(fit) = ahead.fit(index, window) {
+                return fit;
+            }
+        }
+        fitted_frame(&self.chords, at, end, pb)
     }
 
     /// Curvature the path should have at the midpoint of `b`, a line whose

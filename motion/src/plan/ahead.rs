@@ -126,6 +126,20 @@ struct Slot {
     index: u64,
     /// Its blend, or `None` when the planner claimed it first.
     speculation: Option<Speculation>,
+    /// At a junction the planner keeps: the fitted frame at the midpoint
+    /// of its second line, which the worker fitted anyway (the next
+    /// junction's blend starts there), with the fit's window
+    /// ([`window_end`]).
+    fit: Option<(u64, Option<Frame>)>,
+}
+
+/// Where the fit at the midpoint of move `index` stops looking, seeing
+/// moves before `end`: it takes at most FIT_SIDE lines after the centre
+/// (fewer at a corner or a move that is not a line, which both planner
+/// and worker see alike). Two fits at one move with the same window end
+/// see the same chords, so they are the same to the bit.
+pub(super) fn window_end(index: u64, end: u64) -> u64 {
+    end.min(index + 1 + FIT_SIDE as u64)
 }
 
 struct Inbox {
@@ -149,14 +163,21 @@ struct Shared {
     /// The next junction the worker looks at: it has passed every one
     /// before.
     passed: AtomicU64,
-    /// The planner waits for the worker's blends and the worker never
-    /// leaves junctions to the planner, so that every blend the worker can
-    /// make is taken (tests).
+    /// The planner waits for the worker's blends and fits, so that every
+    /// one the worker can make is taken (tests).
     patient: bool,
+    /// The worker takes every junction, leaving none to the planner
+    /// (tests).
+    all: bool,
     slots: Box<[Mutex<Slot>]>,
 }
 
 impl Shared {
+    /// Whether junction `index` is the worker's.
+    fn takes(&self, index: u64) -> bool {
+        self.all || worker_takes(index)
+    }
+
     fn slot_of(&self, index: u64) -> &Mutex<Slot> {
         &self.slots[(index % SLOTS as u64) as usize]
     }
@@ -189,25 +210,30 @@ pub(super) struct Ahead {
     pushed: u64,
     /// Blends taken from the worker.
     pub(super) taken: std::cell::Cell<u64>,
-    /// Blends the planner looked for.
+    /// Blends the planner looked for at the worker's junctions.
     pub(super) looked: std::cell::Cell<u64>,
+    /// Fits the planner looked for at its own junctions.
+    pub(super) fit_looked: std::cell::Cell<u64>,
+    /// Fits the planner took from the worker.
+    pub(super) fitted: std::cell::Cell<u64>,
 }
 
 impl Ahead {
     /// Start a worker; `None` if no thread can be started (the planner
     /// then works everything out itself).
     pub(super) fn start() -> Option<Ahead> {
-        Ahead::spawn(false)
+        Ahead::spawn(false, false)
     }
 
-    /// A worker whose every blend the planner waits for and takes
-    /// (tests: the plan must still be the same to the last bit).
+    /// A worker whose every blend and fit the planner waits for and
+    /// takes, working out every junction (`all`) or its share (tests: the
+    /// plan must still be the same to the last bit).
     #[cfg(test)]
-    pub(super) fn start_patient() -> Option<Ahead> {
-        Ahead::spawn(true)
+    pub(super) fn start_patient(all: bool) -> Option<Ahead> {
+        Ahead::spawn(true, all)
     }
 
-    fn spawn(patient: bool) -> Option<Ahead> {
+    fn spawn(patient: bool, all: bool) -> Option<Ahead> {
         let shared = Arc::new(Shared {
             inbox: Mutex::new(Inbox {
                 inputs: Vec::with_capacity(4 * BATCH),
@@ -219,11 +245,13 @@ impl Ahead {
             closed: AtomicBool::new(false),
             passed: AtomicU64::new(0),
             patient,
+            all,
             slots: (0..SLOTS)
                 .map(|_| {
                     Mutex::new(Slot {
                         index: u64::MAX,
                         speculation: None,
+                        fit: None,
                     })
                 })
                 .collect(),
@@ -240,6 +268,8 @@ impl Ahead {
             pushed: 0,
             taken: std::cell::Cell::new(0),
             looked: std::cell::Cell::new(0),
+            fit_looked: std::cell::Cell::new(0),
+            fitted: std::cell::Cell::new(0),
         })
     }
 
@@ -282,10 +312,10 @@ impl Ahead {
         legs: (f64, f64),
         legs_bc: Option<(f64, f64)>,
     ) -> Option<Speculation> {
-        self.looked.set(self.looked.get() + 1);
-        if !(self.shared.patient || worker_takes(index)) {
+        if !self.shared.takes(index) {
             return None;
         }
+        self.looked.set(self.looked.get() + 1);
         let mut slot = if self.shared.patient {
             self.shared.slot(index)
         } else {
@@ -314,6 +344,7 @@ impl Ahead {
         if slot.index != index {
             slot.index = index;
             slot.speculation = None;
+            slot.fit = None;
             return None;
         }
         let s = slot.speculation.take()?;
@@ -335,6 +366,42 @@ impl Ahead {
         }
         self.taken.set(self.taken.get() + 1);
         Some(s)
+    }
+}
+
+impl Ahead {
+    /// The fitted frame at the midpoint of move `index` (the second line
+    /// of a junction the planner keeps), if the worker has it from a fit
+    /// whose window ends at `window` ([`window_end`]); `None`: fit it.
+    /// Never waits.
+    pub(super) fn fit(&self, index: u64, window: u64) -> Option<Option<Frame>> {
+        if self.shared.takes(index) {
+            return None;
+        }
+        self.fit_looked.set(self.fit_looked.get() + 1);
+        let slot = if self.shared.patient {
+            // The worker publishes it at the next junction.
+            let mut slot = self.shared.slot(index);
+            while slot.index != index && self.shared.passed.load(Ordering::Acquire) <= index + 1 {
+                drop(slot);
+                std::thread::yield_now();
+                slot = self.shared.slot(index);
+            }
+            slot
+        } else {
+            match self.shared.slot_of(index).try_lock() {
+                Ok(slot) => slot,
+                Err(std::sync::TryLockError::Poisoned(p)) => p.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => return None,
+            }
+        };
+        match slot.fit {
+            Some((at, fit)) if slot.index == index && at == window => {
+                self.fitted.set(self.fitted.get() + 1);
+                Some(fit)
+            }
+            _ => None,
+        }
     }
 }
 
@@ -467,7 +534,7 @@ impl Worker {
             // Junctions the planner has decided, or keeps for itself, are
             // left.
             let decided = j <= self.shared.deciding.load(Ordering::Relaxed);
-            if j + 1 < end && !decided && (self.shared.patient || worker_takes(j)) {
+            if j + 1 < end && !decided && self.shared.takes(j) {
                 self.junction(j, end);
             }
             self.next += 1;
@@ -544,8 +611,17 @@ impl Worker {
             // trimmed line starts. (Had the planner decided a's blend
             // seeing other moves, or with another frame, the start differs
             // and it works this one out itself.)
-            let Some(fit_a) = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end)
-            else {
+            let fit_a = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end);
+            if !self.shared.takes(j - 1) {
+                // Junction j − 1 is the planner's: it needs this fit too.
+                let mut slot = self.shared.slot(j - 1);
+                if slot.index != j - 1 {
+                    slot.index = j - 1;
+                    slot.speculation = None;
+                    slot.fit = Some((window_end(j - 1, end), fit_a));
+                }
+            }
+            let Some(fit_a) = fit_a else {
                 return;
             };
             let xyz = |v: &Vec9, rest: &dyn Fn(usize) -> f64| -> Vec9 {
@@ -612,6 +688,7 @@ impl Worker {
         }
         slot.index = j;
         slot.speculation = Some(s);
+        slot.fit = None;
     }
 }
 
@@ -630,22 +707,33 @@ mod tests {
         None,
         /// With the worker, as it ships.
         Worker,
-        /// Waits for every blend the worker can make.
-        Patient,
+        /// Waits for every blend and fit the worker can make, at every
+        /// junction (`all`) or at its share of them.
+        Patient { all: bool },
+    }
+
+    /// How often the planner looked for a worked-out blend and a fit
+    /// from the worker, and how often it took one.
+    #[derive(Clone, Copy, Debug, Default)]
+    struct Taken {
+        looked: u64,
+        taken: u64,
+        fit_looked: u64,
+        fitted: u64,
     }
 
     /// Every segment of `text` planned with `helper`, as text that shows
-    /// every bit of every number, with how many blends the planner looked
-    /// for on dense curves and how many it took from the worker.
-    fn plan(text: &str, helper: Helper) -> (Vec<String>, u64, u64) {
+    /// every bit of every number, with what the planner took from the
+    /// worker on dense curves and at corners.
+    fn plan(text: &str, helper: Helper) -> (Vec<String>, Taken) {
         let kins = xyz(200.0, 3000.0, 60_000.0);
         let config = PlannerConfig {
             blend_worker: !matches!(helper, Helper::None),
             ..PlannerConfig::default()
         };
         let mut p = Planner::new(&kins, Position::ZERO, config);
-        if let Helper::Patient = helper {
-            p.ahead = Ahead::start_patient();
+        if let Helper::Patient { all } = helper {
+            p.ahead = Ahead::start_patient(all);
         }
         let mut out = Vec::new();
         for c in Interpreter::from_text(text, "t.ngc", Position::ZERO) {
@@ -658,11 +746,13 @@ mod tests {
         while let Some(s) = p.next_segment() {
             out.push(format!("{s:?}"));
         }
-        let (looked, taken) = p
-            .ahead
-            .as_ref()
-            .map_or((0, 0), |a| (a.looked.get(), a.taken.get()));
-        (out, looked, taken)
+        let taken = p.ahead.as_ref().map_or(Taken::default(), |a| Taken {
+            looked: a.looked.get(),
+            taken: a.taken.get(),
+            fit_looked: a.fit_looked.get(),
+            fitted: a.fitted.get(),
+        });
+        (out, taken)
     }
 
     /// Dense CAM-like curves, rounded to 3 to 5 decimals, interrupted by
@@ -758,9 +848,14 @@ mod tests {
             .into_iter()
             .chain([3, 17, 29].map(|seed| (program(seed, 60), 0.95)));
         for (seed, (text, share)) in programs.enumerate() {
-            let (alone, _, _) = plan(&text, Helper::None);
-            for helper in [Helper::Patient, Helper::Worker] {
-                let (helped, looked, taken) = plan(&text, helper);
+            let (alone, _) = plan(&text, Helper::None);
+            let helpers = [
+                Helper::Patient { all: true },
+                Helper::Patient { all: false },
+                Helper::Worker,
+            ];
+            for helper in helpers {
+                let (helped, t) = plan(&text, helper);
                 assert_eq!(
                     alone.len(),
                     helped.len(),
@@ -770,17 +865,27 @@ mod tests {
                     assert_eq!(a, h, "program {seed} {helper:?}: segment {k} differs");
                 }
                 // The comparison means something only if the planner took
-                // the worker's blends. A patient planner takes every one
-                // made from where the blend before really ended: nearly
-                // all (the rest follow a blend whose fit failed, and the
-                // planner's fallback ended elsewhere).
-                if let Helper::Patient = helper {
-                    assert!(looked > 1000, "program {seed}: {looked} dense-curve blends");
+                // the worker's blends (and, at its own junctions, its
+                // fits). A patient planner takes every one made from where
+                // the blend before really ended: nearly all (the rest
+                // follow a blend whose fit failed, and the planner's
+                // fallback ended elsewhere).
+                if let Helper::Patient { all } = helper {
+                    let least = if all { 1000 } else { 600 };
+                    assert!(t.looked > least, "program {seed} {helper:?}: {t:?}");
                     assert!(
-                        taken as f64 >= share * looked as f64,
-                        "program {seed}: took {taken} of {looked}"
+                        t.taken as f64 >= share * t.looked as f64,
+                        "program {seed} {helper:?}: {t:?}"
                     );
+                    if !all {
+                        assert!(t.fit_looked > 300, "program {seed}: {t:?}");
+                        assert!(
+                            t.fitted as f64 >= share * t.fit_looked as f64,
+                            "program {seed}: {t:?}"
+                        );
+                    }
                 }
+                eprintln!("program {seed} {helper:?}: {t:?}");
             }
         }
     }
