@@ -23,7 +23,7 @@
 //! that for every blend it takes.
 
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -38,15 +38,48 @@ pub(super) const LEAD: usize = 128;
 /// Moves handed over at once (one lock per batch, not per move).
 const BATCH: usize = 16;
 
-/// Whether junction `index` is the worker's to work out. The planner
-/// keeps one in every three: taking a worked-out blend costs it about a
-/// quarter of working one out, so both threads are about as busy and
-/// neither waits for the other (a 200,000-chord spiral: 1.04 M lines/s,
-/// against 0.96–1.03 M keeping one in two, two in five or one in four).
-/// Sharing by who gets there first had the planner catch up with the
-/// worker and wait for the blend it was on.
-pub(super) fn worker_takes(index: u64) -> bool {
-    index % 3 < 2
+/// How the worker and the planner share the junctions: in share
+/// `(n, k)` junction `j` is the worker's when `j % n < k`, and the planner
+/// keeps the rest, one in every `n`. That one is always followed by one
+/// of the worker's, whose blend starts at the fit the planner's junction
+/// needs, so the planner takes that fit too ([`Ahead::fit`]) and every
+/// line is fitted once.
+///
+/// Which share keeps both threads busy depends on what else the
+/// planner's thread does (a 200,000-chord spiral, read beforehand, ran
+/// fastest at one in two, 1.13–1.17 M lines/s; with the interpreter on
+/// the planner's thread, at one in three, 0.84 M), so the worker moves
+/// between these as it goes (`Worker::adapt`).
+const SHARES: [(u64, u64); 3] = [(2, 1), (3, 2), (4, 3)];
+
+/// Most periods in a row the worker must find itself idle before it
+/// raises its share again.
+const MAX_HOLD: u64 = 64;
+
+/// The share a worker starts with.
+const FIRST_SHARE: usize = 1;
+
+/// Junctions the worker judges its share over.
+const SHARE_PERIOD: u64 = 1024;
+
+/// Whether junction `index` is the worker's in share `share` (an index
+/// into [`SHARES`]).
+fn worker_takes(index: u64, share: usize) -> bool {
+    let (n, k) = SHARES[share];
+    index % n < k
+}
+
+/// A value on cache lines of its own (a pair: x86 fetches them
+/// together), so that one thread writing it does not take away the line
+/// of what the other reads beside it.
+#[repr(align(128))]
+struct Padded<T>(T);
+
+impl<T> std::ops::Deref for Padded<T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        &self.0
+    }
 }
 
 /// Junctions kept worked out: more than the lead, so that the worker's
@@ -152,30 +185,61 @@ struct Shared {
     inbox: Mutex<Inbox>,
     wake: Condvar,
     /// Moves handed over so far: the worker watches it before sleeping.
-    handed: AtomicU64,
+    handed: Padded<AtomicU64>,
     /// The junction the planner is deciding now: the worker skips it and
     /// everything before it.
-    deciding: AtomicU64,
+    deciding: Padded<AtomicU64>,
     /// The planner is gone: stop. (Set before the inbox is locked to wake
     /// the worker, and read under that lock before it sleeps, so the
     /// wake-up is not lost.)
     closed: AtomicBool,
     /// The next junction the worker looks at: it has passed every one
     /// before.
-    passed: AtomicU64,
+    passed: Padded<AtomicU64>,
     /// The planner waits for the worker's blends and fits, so that every
     /// one the worker can make is taken (tests).
     patient: bool,
     /// The worker takes every junction, leaving none to the planner
     /// (tests).
     all: bool,
+    /// Which of [`SHARES`] is in force. Planner and worker may read it
+    /// either side of a change: a junction both think the other's is
+    /// worked out by the planner, and one both think theirs is claimed
+    /// by whoever comes first, so the plan stays the same.
+    share: Padded<AtomicUsize>,
     slots: Box<[Mutex<Slot>]>,
 }
 
 impl Shared {
+    fn new(patient: bool, all: bool) -> Shared {
+        Shared {
+            inbox: Mutex::new(Inbox {
+                inputs: Vec::with_capacity(4 * BATCH),
+                sleeping: false,
+            }),
+            wake: Condvar::new(),
+            handed: Padded(AtomicU64::new(0)),
+            deciding: Padded(AtomicU64::new(0)),
+            closed: AtomicBool::new(false),
+            passed: Padded(AtomicU64::new(0)),
+            patient,
+            all,
+            share: Padded(AtomicUsize::new(FIRST_SHARE)),
+            slots: (0..SLOTS)
+                .map(|_| {
+                    Mutex::new(Slot {
+                        index: u64::MAX,
+                        speculation: None,
+                        fit: None,
+                    })
+                })
+                .collect(),
+        }
+    }
+
     /// Whether junction `index` is the worker's.
     fn takes(&self, index: u64) -> bool {
-        self.all || worker_takes(index)
+        self.all || worker_takes(index, self.share.load(Ordering::Relaxed))
     }
 
     fn slot_of(&self, index: u64) -> &Mutex<Slot> {
@@ -234,28 +298,7 @@ impl Ahead {
     }
 
     fn spawn(patient: bool, all: bool) -> Option<Ahead> {
-        let shared = Arc::new(Shared {
-            inbox: Mutex::new(Inbox {
-                inputs: Vec::with_capacity(4 * BATCH),
-                sleeping: false,
-            }),
-            wake: Condvar::new(),
-            handed: AtomicU64::new(0),
-            deciding: AtomicU64::new(0),
-            closed: AtomicBool::new(false),
-            passed: AtomicU64::new(0),
-            patient,
-            all,
-            slots: (0..SLOTS)
-                .map(|_| {
-                    Mutex::new(Slot {
-                        index: u64::MAX,
-                        speculation: None,
-                        fit: None,
-                    })
-                })
-                .collect(),
-        });
+        let shared = Arc::new(Shared::new(patient, all));
         let theirs = Arc::clone(&shared);
         let worker = std::thread::Builder::new()
             .name("kerf-blends".into())
@@ -432,6 +475,17 @@ struct Worker {
     last_break: Option<u64>,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
+    /// The junction at which the share is next judged (`adapt`).
+    judge_at: u64,
+    /// Since the share was last judged: the worker's junctions the
+    /// planner got to first, and the times the worker ran out of moves.
+    late: u64,
+    idle: u64,
+    /// Periods in a row the worker ran out of moves, never late; how many
+    /// it takes to raise the share; whether the last period raised it.
+    calm: u64,
+    hold: u64,
+    raised: bool,
 }
 
 impl Worker {
@@ -445,7 +499,48 @@ impl Worker {
             next: 1,
             last_break: None,
             last_fit: None,
+            judge_at: SHARE_PERIOD,
+            late: 0,
+            idle: 0,
+            calm: 0,
+            hold: 1,
+            raised: false,
         }
+    }
+
+    /// Move to a smaller share if the planner keeps getting to the
+    /// worker's junctions first (the worker is the slower); to a larger
+    /// one if the worker keeps running out of moves and never falls
+    /// behind (the planner is), for `hold` periods in a row. A larger
+    /// share that turned out too large doubles `hold`, so that the share
+    /// settles where the two threads balance instead of swinging.
+    fn adapt(&mut self) {
+        if !(self.shared.patient || self.shared.all) {
+            let share = self.shared.share.load(Ordering::Relaxed);
+            let mut next = share;
+            if self.late > SHARE_PERIOD / 64 {
+                next = share.saturating_sub(1);
+                if self.raised {
+                    self.hold = (2 * self.hold).min(MAX_HOLD);
+                }
+                self.calm = 0;
+            } else if self.late == 0 && self.idle >= 16 {
+                self.calm += 1;
+                if self.calm >= self.hold {
+                    next = (share + 1).min(SHARES.len() - 1);
+                    self.calm = 0;
+                }
+            } else {
+                self.calm = 0;
+            }
+            self.raised = next > share;
+            if next != share {
+                self.shared.share.store(next, Ordering::Relaxed);
+            }
+        }
+        self.late = 0;
+        self.idle = 0;
+        self.judge_at = self.next + SHARE_PERIOD;
     }
 
     fn run(mut self) {
@@ -455,6 +550,7 @@ impl Worker {
                 let mut inbox = self.shared.inbox();
                 if inbox.inputs.is_empty() && !self.shared.is_closed() {
                     drop(inbox);
+                    self.idle += 1;
                     self.spin();
                     inbox = self.shared.inbox();
                 }
@@ -534,11 +630,16 @@ impl Worker {
             // Junctions the planner has decided, or keeps for itself, are
             // left.
             let decided = j <= self.shared.deciding.load(Ordering::Relaxed);
-            if j + 1 < end && !decided && self.shared.takes(j) {
+            let takes = self.shared.takes(j);
+            if j + 1 < end && !decided && takes {
                 self.junction(j, end);
             }
+            self.late += (decided && takes) as u64;
             self.next += 1;
             self.shared.passed.store(self.next, Ordering::Release);
+            if self.next >= self.judge_at {
+                self.adapt();
+            }
             // Keep what the fits of the next junctions may look back on.
             while self.first + (FIT_SIDE as u64 + 2) < self.next {
                 self.moves.pop_front();
@@ -695,10 +796,11 @@ impl Worker {
 #[cfg(test)]
 mod tests {
     use super::super::{Planner, PlannerConfig};
-    use super::Ahead;
+    use super::{Ahead, Shared, Worker, FIRST_SHARE, SHARES};
     use crate::testkit::{uniform, xyz};
     use kerf_interp::{Interpreter, Position};
     use std::fmt::Write;
+    use std::sync::atomic::Ordering;
 
     /// How the planner gets its blends.
     #[derive(Clone, Copy, Debug)]
@@ -826,6 +928,42 @@ mod tests {
             }
         }
         t + "M2\n"
+    }
+
+    #[test]
+    fn the_share_follows_whichever_thread_is_slower() {
+        let shared = std::sync::Arc::new(Shared::new(false, false));
+        let mut w = Worker::new(shared.clone());
+        let share = || shared.share.load(Ordering::Relaxed);
+        // period: the planner got to `late` of the worker's junctions
+        // first; the worker ran out of moves `idle` times.
+        let mut period = |late: u64, idle: u64| {
+            w.late = late;
+            w.idle = idle;
+            w.adapt();
+        };
+        assert_eq!(share(), FIRST_SHARE);
+        period(40, 0);
+        assert_eq!(share(), FIRST_SHARE - 1, "the worker was late: less for it");
+        period(0, 0);
+        assert_eq!(share(), FIRST_SHARE - 1, "busy and in time: as it is");
+        period(0, 30);
+        assert_eq!(share(), FIRST_SHARE, "idle and in time: more for it");
+        period(40, 0);
+        assert_eq!(share(), FIRST_SHARE - 1, "too much: back");
+        // That raise did not hold, so the next takes two idle periods.
+        period(0, 30);
+        assert_eq!(share(), FIRST_SHARE - 1);
+        period(0, 30);
+        assert_eq!(share(), FIRST_SHARE);
+        for _ in 0..10 {
+            period(0, 30);
+        }
+        assert_eq!(share(), SHARES.len() - 1, "no larger share than the last");
+        for _ in 0..10 {
+            period(40, 0);
+        }
+        assert_eq!(share(), 0, "no smaller share than the first");
     }
 
     #[test]
