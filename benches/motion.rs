@@ -32,6 +32,7 @@
 #[path = "programs.rs"]
 mod programs;
 
+use std::borrow::Borrow;
 use std::time::Instant;
 
 use programs::{circle_small_segments, spiral, stellabee, zigzag_pocket};
@@ -157,13 +158,17 @@ fn polyline_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> Optio
     Some(time)
 }
 
-/// Segments out of a planner fed `canon`, with the seconds it took.
-fn plan_canon<'c>(kins: &dyn Kinematics, canon: impl Iterator<Item = &'c Canon>) -> (usize, f64) {
+/// Segments out of a planner fed `canon`, with the seconds it took
+/// (including whatever it takes to produce `canon`).
+fn plan_canon<C: Borrow<Canon>>(
+    kins: &dyn Kinematics,
+    canon: impl Iterator<Item = C>,
+) -> (usize, f64) {
     let t0 = Instant::now();
     let mut planner = Planner::new(kins, Position::ZERO, PlannerConfig::default());
     let mut segments = 0usize;
     for c in canon {
-        planner.plan(c).unwrap();
+        planner.plan(c.borrow()).unwrap();
         while planner.next_segment().is_some() {
             segments += 1;
         }
@@ -183,28 +188,18 @@ fn plan_canon<'c>(kins: &dyn Kinematics, canon: impl Iterator<Item = &'c Canon>)
 /// sharing a core's caches).
 fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     let t0 = Instant::now();
+    for c in Interpreter::from_text(program, name, Position::ZERO) {
+        c.unwrap();
+    }
+    let interp = t0.elapsed().as_secs_f64();
     let canon: Vec<Canon> = Interpreter::from_text(program, name, Position::ZERO)
         .map(|c| c.unwrap())
         .collect();
-    let interp = t0.elapsed().as_secs_f64();
     let (planned, plan) = plan_canon(kins, canon.iter());
+    let moves = canon.len();
     drop(canon);
-    let t0 = Instant::now();
-    let mut planner = Planner::new(kins, Position::ZERO, PlannerConfig::default());
-    let mut segments = 0usize;
-    let mut moves = 0usize;
-    for c in Interpreter::from_text(program, name, Position::ZERO) {
-        planner.plan(&c.unwrap()).unwrap();
-        moves += 1;
-        while planner.next_segment().is_some() {
-            segments += 1;
-        }
-    }
-    planner.finish();
-    while planner.next_segment().is_some() {
-        segments += 1;
-    }
-    let total = t0.elapsed().as_secs_f64();
+    let pipeline = Interpreter::from_text(program, name, Position::ZERO).map(|c| c.unwrap());
+    let (segments, total) = plan_canon(kins, pipeline);
     assert_eq!(planned, segments, "{name}: the same plan both ways");
     let rest = (total - interp).max(1e-9);
     // Segments out (a line a blend consumes gives none, a blended corner

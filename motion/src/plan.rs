@@ -401,6 +401,16 @@ impl Programmed {
     }
 }
 
+/// How many corner blend legs are tried ([`corner_legs`]).
+const CORNER_TRIES: usize = 9;
+
+/// The legs a corner blend tries, in order, until one is within the
+/// tolerance: `legs` (the tolerance's), then 0.7 times the one before.
+/// The planner and the blend worker both follow it.
+fn corner_legs(legs: (f64, f64)) -> impl Iterator<Item = (f64, f64)> {
+    std::iter::successors(Some(legs), |l| Some((l.0 * 0.7, l.1 * 0.7))).take(CORNER_TRIES)
+}
+
 /// The blend legs at the vertex between lines `la` and `lb`, `lb`
 /// programmed in `mode`: how much of `la`'s end and of `lb`'s start the
 /// blend replaces (None: no blend). Each leg is the tolerance's leg or
@@ -1910,7 +1920,7 @@ impl<'k> Planner<'k> {
     /// points and the curvature it ends with.
     fn choose_blend(&self, both_lines: bool) -> Option<Chosen> {
         let (a, b) = (&self.pending[0], &self.pending[1]);
-        let mut legs = if both_lines {
+        let legs = if both_lines {
             self.legs(a, b)?
         } else {
             return None;
@@ -1950,30 +1960,31 @@ impl<'k> Planner<'k> {
                 );
                 Some(mid)
             };
-            if let Some(Speculation {
+            // The blend into `mid`, if both it and the one out of it fit.
+            let through = |mid: Frame| {
+                let bl = self.blend_within(a, b, legs, &start, &mid)?;
+                self.blend_within(b, c, legs_bc, &mid, &c_start)?;
+                Some((legs, bl, mid, None))
+            };
+            let fitted = if let Some(Speculation {
                 worked: Worked::Dense { fit, ab, bc },
                 sampled,
                 ..
             }) = worked
             {
-                if let (Some(mid), Some(ab), Some(bc)) = (fit, ab, bc) {
-                    if self.blend_in_reach(&ab) && self.blend_in_reach(&bc) {
-                        return Some((legs, ab, mid, sampled));
+                match (fit, ab, bc) {
+                    (Some(mid), Some(ab), Some(bc))
+                        if self.blend_in_reach(&ab) && self.blend_in_reach(&bc) =>
+                    {
+                        Some((legs, ab, mid, sampled))
                     }
+                    _ => None,
                 }
-            } else if let Some(mid) = self.fitted_mid() {
-                if let Some(bl) = self.blend_within(a, b, legs, &start, &mid) {
-                    if self.blend_within(b, c, legs_bc, &mid, &c_start).is_some() {
-                        return Some((legs, bl, mid, None));
-                    }
-                }
-            }
-            if let Some(mid) = vertices() {
-                if let Some(bl) = self.blend_within(a, b, legs, &start, &mid) {
-                    if self.blend_within(b, c, legs_bc, &mid, &c_start).is_some() {
-                        return Some((legs, bl, mid, None));
-                    }
-                }
+            } else {
+                self.fitted_mid().and_then(through)
+            };
+            if let Some(chosen) = fitted.or_else(|| vertices().and_then(through)) {
+                return Some(chosen);
             }
         }
         // Zero curvature at b's end. With the start fixed the legs are too
@@ -1997,18 +2008,19 @@ impl<'k> Planner<'k> {
                 None => return None,
             }
         }
-        let mut found = self.blend_within(a, b, legs, &start, &end(legs)?);
-        if !a_consumed {
-            for _ in 0..8 {
-                if found.is_some() {
-                    break;
-                }
-                legs = (legs.0 * 0.7, legs.1 * 0.7);
-                found = self.blend_within(a, b, legs, &on_line(a, legs.0, true)?, &end(legs)?);
+        let tries = if a_consumed { 1 } else { CORNER_TRIES };
+        for legs in corner_legs(legs).take(tries) {
+            let from = if a_consumed {
+                start
+            } else {
+                on_line(a, legs.0, true)?
+            };
+            let to = end(legs)?;
+            if let Some(control) = self.blend_within(a, b, legs, &from, &to) {
+                return Some((legs, control, to, None));
             }
         }
-        let mid = end(legs)?;
-        found.map(|control| (legs, control, mid, None))
+        None
     }
 
     /// Speed cap where `a` meets `b` without a blend: straight or tangent

@@ -28,7 +28,9 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use super::{blend_legs, blend_near, fitted_frame, Chord, PathMode, Programmed, FIT_SIDE};
+use super::{
+    blend_legs, blend_near, corner_legs, fitted_frame, Chord, PathMode, Programmed, FIT_SIDE,
+};
 use crate::path::{Blend, BlendExtremes, Frame, Vec9};
 
 /// How many more lines the planner holds back while the worker runs, so
@@ -254,6 +256,29 @@ impl Shared {
             .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
+    /// Slot `index` for the planner, `None` while the worker holds it:
+    /// working the blend or fit out costs about what waiting would,
+    /// without the sleep and the wake-up. A patient planner (tests) waits
+    /// instead, until the worker has filled the slot or passed junction
+    /// `filled_by`; it always gets there, since the planner holds back
+    /// LEAD moves, more than a batch, or has flushed.
+    fn planner_slot(&self, index: u64, filled_by: u64) -> Option<MutexGuard<'_, Slot>> {
+        if !self.patient {
+            return match self.slot_of(index).try_lock() {
+                Ok(slot) => Some(slot),
+                Err(std::sync::TryLockError::Poisoned(p)) => Some(p.into_inner()),
+                Err(std::sync::TryLockError::WouldBlock) => None,
+            };
+        }
+        let mut slot = self.slot(index);
+        while slot.index != index && self.passed.load(Ordering::Acquire) <= filled_by {
+            drop(slot);
+            std::thread::yield_now();
+            slot = self.slot(index);
+        }
+        Some(slot)
+    }
+
     fn is_closed(&self) -> bool {
         self.closed.load(Ordering::Relaxed)
     }
@@ -359,31 +384,10 @@ impl Ahead {
             return None;
         }
         self.looked.set(self.looked.get() + 1);
-        let mut slot = if self.shared.patient {
-            self.shared.slot(index)
-        } else {
-            // Not while the worker is on it: working it out costs about
-            // what waiting would, without the sleep and the wake-up.
-            match self.shared.slot_of(index).try_lock() {
-                Ok(slot) => slot,
-                Err(std::sync::TryLockError::Poisoned(p)) => p.into_inner(),
-                Err(std::sync::TryLockError::WouldBlock) => {
-                    self.shared.deciding.store(index, Ordering::Relaxed);
-                    return None;
-                }
-            }
-        };
-        if self.shared.patient {
-            // The worker has every move it needs (the planner holds back
-            // LEAD moves, more than a batch, or has flushed).
-            while slot.index != index && self.shared.passed.load(Ordering::Acquire) <= index {
-                drop(slot);
-                std::thread::yield_now();
-                slot = self.shared.slot(index);
-            }
-        } else {
+        if !self.shared.patient {
             self.shared.deciding.store(index, Ordering::Relaxed);
         }
+        let mut slot = self.shared.planner_slot(index, index)?;
         if slot.index != index {
             slot.index = index;
             slot.speculation = None;
@@ -410,9 +414,7 @@ impl Ahead {
         self.taken.set(self.taken.get() + 1);
         Some(s)
     }
-}
 
-impl Ahead {
     /// The fitted frame at the midpoint of move `index` (the second line
     /// of a junction the planner keeps), if the worker has it from a fit
     /// whose window ends at `window` ([`window_end`]); `None`: fit it.
@@ -422,22 +424,8 @@ impl Ahead {
             return None;
         }
         self.fit_looked.set(self.fit_looked.get() + 1);
-        let slot = if self.shared.patient {
-            // The worker publishes it at the next junction.
-            let mut slot = self.shared.slot(index);
-            while slot.index != index && self.shared.passed.load(Ordering::Acquire) <= index + 1 {
-                drop(slot);
-                std::thread::yield_now();
-                slot = self.shared.slot(index);
-            }
-            slot
-        } else {
-            match self.shared.slot_of(index).try_lock() {
-                Ok(slot) => slot,
-                Err(std::sync::TryLockError::Poisoned(p)) => p.into_inner(),
-                Err(std::sync::TryLockError::WouldBlock) => return None,
-            }
-        };
+        // The worker hands it over at the next junction.
+        let slot = self.shared.planner_slot(index, index + 1)?;
         match slot.fit {
             Some((at, fit)) if slot.index == index && at == window => {
                 self.fitted.set(self.fitted.get() + 1);
@@ -771,11 +759,7 @@ impl Worker {
             s.worked = Worked::Dense { fit, ab, bc };
         } else {
             // The planner's corner: the tolerance's legs, then shorter.
-            let mut legs = legs;
-            for k in 0..9 {
-                if k > 0 {
-                    legs = (legs.0 * 0.7, legs.1 * 0.7);
-                }
+            for legs in corner_legs(legs) {
                 let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
                 let (control, near) = blend_near(&a, &b, tolerance, legs, &from, &to);
                 if near {
