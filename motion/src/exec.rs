@@ -146,18 +146,31 @@ fn approach_reach(v: f64, a: f64, amax: f64, jmax: f64) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Whether the shortest stop from (`v`, `a`) under `amax` and `jmax`
-/// passes `dist` ahead at no more than `limit` (counting what a positive
-/// acceleration still adds) and with an acceleration within `amax` either
-/// way, so that it may go on into the next segment.
-fn passes_below(v: f64, a: f64, limit: f64, dist: f64, amax: f64, jmax: f64) -> bool {
-    jmax.is_finite()
-        && Brake::shortest(v, a, 0.0, amax, jmax).is_some_and(|stop| {
-            let (speed, acceleration) = stop.state_at_distance(dist);
-            // Still speeding up there, it would overshoot the cap after.
-            within_cap(speed, acceleration, limit, jmax)
-                && acceleration.abs() <= amax * (1.0 + 1e-12)
-        })
+/// Where the shortest stop from (`v`, `a`) under `amax` and `jmax`
+/// passes `dist` ahead — its speed and acceleration there — if it passes at
+/// no more than `limit` (counting what a positive acceleration still adds)
+/// and with an acceleration within `amax` either way, so that it may go on
+/// into the next segment.
+fn passes_below(v: f64, a: f64, limit: f64, dist: f64, amax: f64, jmax: f64) -> Option<(f64, f64)> {
+    if !jmax.is_finite() {
+        return None;
+    }
+    let stop = Brake::shortest(v, a, 0.0, amax, jmax)?;
+    let (speed, acceleration) = stop.state_at_distance(dist);
+    // Still speeding up there, it would overshoot the cap after.
+    (within_cap(speed, acceleration, limit, jmax) && acceleration.abs() <= amax * (1.0 + 1e-12))
+        .then_some((speed, acceleration))
+}
+
+/// Easing acceleration `a` at speed `v` down to ±`limit` with jerk
+/// `jmax`: the distance travelled by then, plus one period's travel (the
+/// motion steps whole periods, and a segment counts once this period can
+/// reach it), and whether the speed reaches zero first (braking).
+fn easing(v: f64, a: f64, limit: f64, jmax: f64, period: f64) -> (f64, bool) {
+    let t = (a.abs() - limit) / jmax;
+    let j = -jmax * a.signum();
+    let ease = v * t + a * t * t / 2.0 + j * t * t * t / 6.0 + (v + a.max(0.0) * t) * period;
+    (ease, a < 0.0 && v + a * t + j * t * t / 2.0 <= 0.0)
 }
 
 /// Segments from the head whose acceleration limits the jerk search tries
@@ -554,6 +567,62 @@ impl Executor {
         }
     }
 
+    /// Whether motion at speed `v` and acceleration `a`, `gap` before the
+    /// start of segment `k`, can ease its acceleration at once, with jerk
+    /// at most `jmax` (lower where the segments' limits are), into the
+    /// acceleration limit of each segment from `k` on that it reaches
+    /// without having to slow down below `limit` first, by the time that
+    /// segment starts (a period's travel early, as the look ahead counts).
+    ///
+    /// A look ahead that lets a cap be passed braking hard must ask this
+    /// too: a short segment after the cap, then one with a much lower
+    /// acceleration limit (a long blend after dense chords) leaves no room
+    /// to ease the braking, and the jerk search then finds only braking
+    /// harder, which enters that segment decelerating several times over
+    /// its limit. A segment behind a lower cap is left to that cap's own
+    /// check: the motion brakes on for it anyway.
+    #[allow(clippy::too_many_arguments)]
+    fn eases_in_time(
+        &self,
+        q: View,
+        k: usize,
+        gap: f64,
+        limit: f64,
+        v: f64,
+        a: f64,
+        jmax: f64,
+    ) -> bool {
+        let mut jmax = jmax;
+        let mut start = gap;
+        for m in k..k + LOOK_PAST_REACH {
+            // A segment after a stop is entered from rest.
+            if q.get(m - 1).is_none_or(|p| p.exit_velocity == 0.0) {
+                return true;
+            }
+            let Some(seg) = q.get(m).filter(|s| s.is_motion()) else {
+                return true;
+            };
+            if self.cap(seg) <= limit {
+                return true;
+            }
+            jmax = jmax.min(seg.max_jerk);
+            // No segment further on is reached still easing.
+            if start > (v + a * a / jmax) * (a.abs() / jmax + self.period) + 1e-12 {
+                return true;
+            }
+            if a.abs() > seg.max_acceleration {
+                // Easing braking until the speed runs out is no way out:
+                // it would reach zero still decelerating.
+                let (ease, runs_out) = easing(v, a, seg.max_acceleration, jmax, self.period);
+                if ease > start + 1e-12 || runs_out {
+                    return false;
+                }
+            }
+            start += seg.length;
+        }
+        true
+    }
+
     /// Check that from (s_head, v, a) in `head` (index into `q`) every cap
     /// ahead can still be met: each speed cap by jerk-limited braking, and
     /// each segment with a lower acceleration limit by easing a positive
@@ -628,17 +697,9 @@ impl Executor {
                     if k > head && a.abs() > seg.max_acceleration {
                         // The acceleration must be within this segment's
                         // limit by its start: ease it there with jerk J.
-                        let t = (a.abs() - seg.max_acceleration) / jmax;
-                        let j = -jmax * a.signum();
-                        // One period more: the motion steps whole periods,
-                        // and a segment counts once this period can reach it.
-                        let ease = v * t
-                            + a * t * t / 2.0
-                            + j * t * t * t / 6.0
-                            + (v + a.max(0.0) * t) * self.period;
                         // Braking that comes to rest before the segment
                         // never enters it.
-                        let rests = a < 0.0 && v + a * t + j * t * t / 2.0 <= 0.0;
+                        let (ease, rests) = easing(v, a, seg.max_acceleration, jmax, self.period);
                         if ease > dist + 1e-12 && !rests {
                             return Ahead::blocked();
                         }
@@ -668,6 +729,11 @@ impl Executor {
                                 (amax.min(n.max_acceleration), jmax.min(n.max_jerk))
                             });
                         let crest = v + a.max(0.0).powi(2) / (2.0 * jn);
+                        let margin = v.max(limit) * self.period;
+                        let next_length = q
+                            .get(k + 1)
+                            .filter(|n| n.is_motion())
+                            .map_or(f64::INFINITY, |n| n.length);
                         // Met if it can be reached with zero acceleration,
                         // or if braking at once passes it below the cap
                         // (still slowing down, for a cap beyond it) a
@@ -678,7 +744,19 @@ impl Executor {
                         if limit < crest
                             && braking_distance(v, a, limit, amax, jn) > dist + 1e-9
                             && !excepted(dist, limit)
-                            && !passes_below(v, a, limit, dist - v.max(limit) * self.period, an, jn)
+                            && !passes_below(v, a, limit, dist - margin, an, jn).is_some_and(
+                                |(speed, acceleration)| {
+                                    self.eases_in_time(
+                                        q,
+                                        k + 2,
+                                        margin + next_length,
+                                        limit,
+                                        speed,
+                                        acceleration,
+                                        jn,
+                                    )
+                                },
+                            )
                         {
                             fail(Binding {
                                 dist,
@@ -1410,6 +1488,24 @@ mod simulation {
         }
     }
 
+    /// Runs `q` (planned from `text`) to its end: messages naming `case`
+    /// if it does not end exactly at `end` (X Y Z) or exceeds a limit.
+    fn judge(q: &mut VecDeque<Segment>, end: [f64; 3], case: &str, text: &str) -> Vec<String> {
+        let out = run(q, |_, _| {});
+        let mut failures = Vec::new();
+        let at = out.last().unwrap().position;
+        if (0..3).any(|i| (at.to_array()[i] - end[i]).abs() >= 1e-9) {
+            failures.push(format!("{case}: ended at {at:?}, programmed {end:?}"));
+        }
+        let (v, a, j) = limit_use(&out);
+        if v > 1.0 + 1e-6 || a > 1.0 + 1e-6 || j > 1.0 + 1e-6 {
+            failures.push(format!(
+                "{case}: velocity {v}, acceleration {a}, jerk {j}\n{text}"
+            ));
+        }
+        failures
+    }
+
     /// Random programs of 30 moves from `seed`: long moves, tiny ones,
     /// shallow and sharp corners, reversals, rapids and plunges, at the
     /// three tolerances in turn, planned with curvature-rate share
@@ -1460,19 +1556,8 @@ mod simulation {
                     ..Default::default()
                 },
             );
-            let out = run(&mut q, |_, _| {});
-            let end = out.last().unwrap().position;
-            if (end.x - x).abs() >= 1e-9 || (end.y - y).abs() >= 1e-9 || (end.z - z).abs() >= 1e-9 {
-                failures.push(format!(
-                    "seed {seed} case {case}: ended at {end:?}, programmed X{x} Y{y} Z{z}"
-                ));
-            }
-            let (v, a, j) = limit_use(&out);
-            if v > 1.0 + 1e-6 || a > 1.0 + 1e-6 || j > 1.0 + 1e-6 {
-                failures.push(format!(
-                    "seed {seed} case {case} (P{tolerance}, rate share {rate_share}): velocity {v}, acceleration {a}, jerk {j}\n{text}"
-                ));
-            }
+            let case = format!("seed {seed} case {case} (P{tolerance}, rate share {rate_share})");
+            failures.extend(judge(&mut q, [x, y, z], &case, &text));
         }
         failures
     }
@@ -1693,5 +1778,114 @@ mod simulation {
         assert_eq!(out.last().unwrap().position.x, 30.0);
         assert_eq!(steps, 3, "one step per line");
         assert!(out.len() > 2000);
+    }
+
+    /// A random program of 20 pieces from `rng`: rapids, long and tiny
+    /// lines with plunges, arcs and helices of 0.2–20 mm radius, and runs
+    /// of 10–210 chords of 0.01–0.2 mm along circles (dense CAM curves),
+    /// with the point it ends at.
+    fn mixed_program(rng: &mut Rng) -> (String, [f64; 3]) {
+        use std::f64::consts::{PI, TAU};
+        let round = |v: f64| (v * 1e4).round() / 1e4;
+        let mut text = String::from("G21 G90 G17\n");
+        let (mut x, mut y, mut z) = (0.0f64, 0.0f64, 0.0f64);
+        for _ in 0..20 {
+            let kind = rng.next();
+            let feed = 300.0 + rng.next() * 9000.0;
+            if kind < 0.15 {
+                let (len, angle) = (1.0 + rng.next() * 30.0, rng.next() * TAU);
+                (x, y) = (round(x + len * angle.cos()), round(y + len * angle.sin()));
+                text += &format!("G0 X{x:.4} Y{y:.4} Z{z:.4}\n");
+            } else if kind < 0.45 {
+                let r = 0.2 + rng.next() * 20.0;
+                let a0 = rng.next() * TAU;
+                let (cx, cy) = (x - r * a0.cos(), y - r * a0.sin());
+                let sweep = (rng.next() - 0.5) * 3.0 * PI;
+                let code = if sweep > 0.0 { "G3" } else { "G2" };
+                let (i, j) = (round(cx - x), round(cy - y));
+                if rng.next() < 0.2 {
+                    z = round(z - rng.next() * 2.0);
+                }
+                let a1 = a0 + sweep;
+                (x, y) = (round(cx + r * a1.cos()), round(cy + r * a1.sin()));
+                text += &format!("{code} X{x:.4} Y{y:.4} Z{z:.4} I{i:.4} J{j:.4} F{feed:.0}\n");
+            } else if kind < 0.65 {
+                let r = 1.0 + rng.next() * 30.0;
+                let chord = 0.01 + rng.next() * 0.19;
+                let a0 = rng.next() * TAU;
+                let (cx, cy) = (x - r * a0.cos(), y - r * a0.sin());
+                let turn = if rng.next() < 0.5 { 1.0 } else { -1.0 };
+                let n = 10 + (rng.next() * 200.0) as usize;
+                text += &format!("G1 F{feed:.0}\n");
+                for k in 1..=n {
+                    let a = a0 + turn * k as f64 * chord / r;
+                    (x, y) = (round(cx + r * a.cos()), round(cy + r * a.sin()));
+                    text += &format!("X{x:.4} Y{y:.4}\n");
+                }
+            } else {
+                let len = if rng.next() < 0.3 {
+                    0.01 + rng.next() * 0.2
+                } else {
+                    1.0 + rng.next() * 40.0
+                };
+                let angle = rng.next() * TAU;
+                (x, y) = (round(x + len * angle.cos()), round(y + len * angle.sin()));
+                if rng.next() < 0.15 {
+                    z = round(-rng.next() * 10.0);
+                }
+                text += &format!("G1 X{x:.4} Y{y:.4} Z{z:.4} F{feed:.0}\n");
+            }
+        }
+        (text + "M2\n", [x, y, z])
+    }
+
+    /// Runs `cases` programs of [`mixed_program`] from `seed` (only those
+    /// `only` keeps), at tolerances 0.005, 0.01, 0.05 and 0.5 mm in turn;
+    /// each must end exactly where programmed, within limits. Returns the
+    /// failures as messages.
+    fn mixed_programs(seed: u64, cases: usize, only: impl Fn(usize) -> bool) -> Vec<String> {
+        let mut rng = Rng(seed);
+        let mut failures = Vec::new();
+        for case in 0..cases {
+            let (text, end) = mixed_program(&mut rng);
+            if !only(case) {
+                continue;
+            }
+            let tolerance = [0.005, 0.01, 0.05, 0.5][case % 4];
+            let mut q = planned(&text, PathMode::Blend { tolerance });
+            let case = format!("seed {seed} case {case} (P{tolerance})");
+            failures.extend(judge(&mut q, end, &case, &text));
+        }
+        failures
+    }
+
+    /// Dense chords, then a long blend with a much lower acceleration limit
+    /// just past a short one: the look ahead let the motion brake through
+    /// the short blend's speed cap as hard as it could, from where easing
+    /// into the long blend's limit no longer fitted, and the jerk search
+    /// braked harder still (seed 1, cases 7, 15, 23 and 27: jerk 4.5, 6.1,
+    /// 4.9 and 5.1 times the limit). [`Executor::eases_in_time`] now fails
+    /// such states while an approach can still be started.
+    #[test]
+    fn braking_through_a_cap_leaves_room_to_ease_into_a_lower_acceleration_limit() {
+        let failures = mixed_programs(1, 28, |case| [7, 15, 23, 27].contains(&case));
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// 300 programs with arcs, helices and dense curves (seeds 2–6, 60
+    /// each): `cargo test --release -p kerf-motion -- --ignored
+    /// mixed_program_sweep --nocapture`, 6 s. Not yet clean: 12 of the 300
+    /// exceed the jerk limit (1.13–5.7 times), 33 before
+    /// `eases_in_time`; see docs/motion.md, Known limits.
+    #[test]
+    #[ignore = "long sweep, not yet clean; run on demand"]
+    fn mixed_program_sweep() {
+        let failures: Vec<String> = (2..=6)
+            .flat_map(|seed| mixed_programs(seed, 60, |_| true))
+            .collect();
+        for f in &failures {
+            eprintln!("{}", f.lines().next().unwrap_or_default());
+        }
+        assert!(failures.is_empty(), "{} of 300 failed", failures.len());
     }
 }
