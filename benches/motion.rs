@@ -185,10 +185,11 @@ fn plan_canon<C: Borrow<Canon>>(
 /// several is what the planner does, and the range shows the noise.
 const PASSES: usize = 5;
 
-/// Median, lowest and highest of `times`, s.
-fn spread(mut times: Vec<f64>) -> (f64, f64, f64) {
+/// Median, lowest and highest of [`PASSES`] timings of `pass`, s.
+fn passes(mut pass: impl FnMut() -> f64) -> (f64, f64, f64) {
+    let mut times: Vec<f64> = (0..PASSES).map(|_| pass()).collect();
     times.sort_by(f64::total_cmp);
-    (times[times.len() / 2], times[0], times[times.len() - 1])
+    (times[PASSES / 2], times[0], times[PASSES - 1])
 }
 
 /// Prints planning throughput three ways, each the median of [`PASSES`]
@@ -199,45 +200,30 @@ fn spread(mut times: Vec<f64>) -> (f64, f64, f64) {
 /// planner's share of the pipeline, which also pays for the two sharing a
 /// core's caches).
 fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
-    let interp = spread(
-        (0..PASSES)
-            .map(|_| {
-                let t0 = Instant::now();
-                for c in Interpreter::from_text(program, name, Position::ZERO) {
-                    c.unwrap();
-                }
-                t0.elapsed().as_secs_f64()
-            })
-            .collect(),
-    )
-    .0;
+    let (interp, _, _) = passes(|| {
+        let t0 = Instant::now();
+        for c in Interpreter::from_text(program, name, Position::ZERO) {
+            c.unwrap();
+        }
+        t0.elapsed().as_secs_f64()
+    });
     let canon: Vec<Canon> = Interpreter::from_text(program, name, Position::ZERO)
         .map(|c| c.unwrap())
         .collect();
     let mut planned = 0;
-    let plan = spread(
-        (0..PASSES)
-            .map(|_| {
-                let (segments, time) = plan_canon(kins, canon.iter());
-                planned = segments;
-                time
-            })
-            .collect(),
-    );
+    let plan = passes(|| {
+        let (segments, time) = plan_canon(kins, canon.iter());
+        planned = segments;
+        time
+    });
     let moves = canon.len();
     drop(canon);
-    let total = spread(
-        (0..PASSES)
-            .map(|_| {
-                let pipeline =
-                    Interpreter::from_text(program, name, Position::ZERO).map(|c| c.unwrap());
-                let (segments, time) = plan_canon(kins, pipeline);
-                assert_eq!(planned, segments, "{name}: the same plan both ways");
-                time
-            })
-            .collect(),
-    )
-    .0;
+    let (total, _, _) = passes(|| {
+        let pipeline = Interpreter::from_text(program, name, Position::ZERO).map(|c| c.unwrap());
+        let (segments, time) = plan_canon(kins, pipeline);
+        assert_eq!(planned, segments, "{name}: the same plan both ways");
+        time
+    });
     let rest = (total - interp).max(1e-9);
     let rate = |t: f64| planned as f64 / t;
     // Segments out (a line a blend consumes gives none, a blended corner

@@ -1874,7 +1874,7 @@ mod simulation {
 
     /// 300 programs with arcs, helices and dense curves (seeds 2–6, 60
     /// each): `cargo test --release -p kerf-motion -- --ignored
-    /// mixed_program_sweep --nocapture`, 6 s. Not yet clean: 12 of the 300
+    /// mixed_program_sweep --nocapture`, 9 s. Not yet clean: 12 of the 300
     /// exceed the jerk limit (1.13–5.7 times), 33 before
     /// `eases_in_time`; see docs/motion.md, Known limits.
     #[test]

@@ -297,14 +297,24 @@ pub(super) struct Ahead {
     batch: Vec<Input>,
     /// Moves handed over so far, batched or not.
     pushed: u64,
-    /// Blends taken from the worker.
-    pub(super) taken: std::cell::Cell<u64>,
+    /// What the planner looked for and took (tests only).
+    #[cfg(test)]
+    tally: std::cell::Cell<Tally>,
+}
+
+/// How often the planner looked for a worked-out blend and a fit from the
+/// worker, and how often it took one: the tests hold the share taken.
+#[cfg(test)]
+#[derive(Clone, Copy, Debug, Default)]
+struct Tally {
     /// Blends the planner looked for at the worker's junctions.
-    pub(super) looked: std::cell::Cell<u64>,
+    looked: u64,
+    /// Blends taken from the worker.
+    taken: u64,
     /// Fits the planner looked for at its own junctions.
-    pub(super) fit_looked: std::cell::Cell<u64>,
+    fit_looked: u64,
     /// Fits the planner took from the worker.
-    pub(super) fitted: std::cell::Cell<u64>,
+    fitted: u64,
 }
 
 impl Ahead {
@@ -334,11 +344,17 @@ impl Ahead {
             worker: Some(worker),
             batch: Vec::with_capacity(BATCH + 1),
             pushed: 0,
-            taken: std::cell::Cell::new(0),
-            looked: std::cell::Cell::new(0),
-            fit_looked: std::cell::Cell::new(0),
-            fitted: std::cell::Cell::new(0),
+            #[cfg(test)]
+            tally: Default::default(),
         })
+    }
+
+    /// Count in the tally (tests only).
+    #[cfg(test)]
+    fn count(&self, f: impl FnOnce(&mut Tally)) {
+        let mut t = self.tally.get();
+        f(&mut t);
+        self.tally.set(t);
     }
 
     /// The planner queued `m` (every waiting move, in order).
@@ -383,7 +399,8 @@ impl Ahead {
         if !self.shared.takes(index) {
             return None;
         }
-        self.looked.set(self.looked.get() + 1);
+        #[cfg(test)]
+        self.count(|t| t.looked += 1);
         if !self.shared.patient {
             self.shared.deciding.store(index, Ordering::Relaxed);
         }
@@ -411,7 +428,8 @@ impl Ahead {
         if !(legs_same && frame_same(&s.start, start)) {
             return None;
         }
-        self.taken.set(self.taken.get() + 1);
+        #[cfg(test)]
+        self.count(|t| t.taken += 1);
         Some(s)
     }
 
@@ -423,12 +441,14 @@ impl Ahead {
         if self.shared.takes(index) {
             return None;
         }
-        self.fit_looked.set(self.fit_looked.get() + 1);
+        #[cfg(test)]
+        self.count(|t| t.fit_looked += 1);
         // The worker hands it over at the next junction.
         let slot = self.shared.planner_slot(index, index + 1)?;
         match slot.fit {
             Some((at, fit)) if slot.index == index && at == window => {
-                self.fitted.set(self.fitted.get() + 1);
+                #[cfg(test)]
+                self.count(|t| t.fitted += 1);
                 Some(fit)
             }
             _ => None,
@@ -780,7 +800,7 @@ impl Worker {
 #[cfg(test)]
 mod tests {
     use super::super::{Planner, PlannerConfig};
-    use super::{Ahead, Shared, Worker, FIRST_SHARE, SHARES};
+    use super::{Ahead, Shared, Tally, Worker, FIRST_SHARE, SHARES};
     use crate::testkit::{uniform, xyz};
     use kerf_interp::{Interpreter, Position};
     use std::fmt::Write;
@@ -798,20 +818,10 @@ mod tests {
         Patient { all: bool },
     }
 
-    /// How often the planner looked for a worked-out blend and a fit
-    /// from the worker, and how often it took one.
-    #[derive(Clone, Copy, Debug, Default)]
-    struct Taken {
-        looked: u64,
-        taken: u64,
-        fit_looked: u64,
-        fitted: u64,
-    }
-
     /// Every segment of `text` planned with `helper`, as text that shows
     /// every bit of every number, with what the planner took from the
     /// worker on dense curves and at corners.
-    fn plan(text: &str, helper: Helper) -> (Vec<String>, Taken) {
+    fn plan(text: &str, helper: Helper) -> (Vec<String>, Tally) {
         let kins = xyz(200.0, 3000.0, 60_000.0);
         let config = PlannerConfig {
             blend_worker: !matches!(helper, Helper::None),
@@ -832,13 +842,8 @@ mod tests {
         while let Some(s) = p.next_segment() {
             out.push(format!("{s:?}"));
         }
-        let taken = p.ahead.as_ref().map_or(Taken::default(), |a| Taken {
-            looked: a.looked.get(),
-            taken: a.taken.get(),
-            fit_looked: a.fit_looked.get(),
-            fitted: a.fitted.get(),
-        });
-        (out, taken)
+        let tally = p.ahead.as_ref().map_or(Tally::default(), |a| a.tally.get());
+        (out, tally)
     }
 
     /// Dense CAM-like curves, rounded to 3 to 5 decimals, interrupted by
