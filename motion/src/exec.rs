@@ -61,6 +61,22 @@ pub struct Executor {
     input_released: bool,
     /// Servo period of the last tick, s.
     period: f64,
+    /// The caps the look ahead meets.
+    caps: Caps,
+}
+
+/// Which speed caps a look ahead must meet.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Caps {
+    /// All of them: the machine's, the program's feed under the overrides,
+    /// feed hold and single block.
+    All,
+    /// Only the machine's speed limits and the program's stops (dwells,
+    /// stop markers, the end of the queue). The operator's caps (hold,
+    /// overrides, single block) and the programmed feed may be met late
+    /// when meeting them in time would break a machine limit: a hold or an
+    /// override cut that arrives with a slower segment just ahead.
+    Machine,
 }
 
 /// Two slices read as one queue.
@@ -223,6 +239,21 @@ fn tracking_acceleration(v: f64, a: f64, target: f64, dt: f64, amax: f64, jmax: 
     let root = jmax * (-h + (h * h + 2.0 * rest.abs() / jmax).sqrt());
     let a_next = if rest < 0.0 { root } else { -root };
     a_next.clamp(-amax, amax)
+}
+
+/// Bisects `rounds` times between `holds`, where `test` is true, and
+/// `fails`, where it is false: the pair narrowed, in that order.
+fn narrow(holds: f64, fails: f64, rounds: usize, test: impl Fn(f64) -> bool) -> (f64, f64) {
+    let (mut holds, mut fails) = (holds, fails);
+    for _ in 0..rounds {
+        let mid = (holds + fails) / 2.0;
+        if test(mid) {
+            holds = mid;
+        } else {
+            fails = mid;
+        }
+    }
+    (holds, fails)
 }
 
 /// What a look ahead found.
@@ -426,6 +457,16 @@ struct Binding {
     jmax: f64,
 }
 
+/// The machine's speed limit on `seg`: zero at a dwell, a stop or an
+/// M62-M66 point, where the program itself stops the motion.
+fn machine_cap(seg: &Segment) -> f64 {
+    if seg.is_motion() {
+        seg.max_velocity
+    } else {
+        0.0
+    }
+}
+
 /// Whether motion at speed `v` and acceleration `a` stays within `cap`
 /// even if the acceleration is eased off at once with jerk `jmax`.
 fn within_cap(v: f64, a: f64, cap: f64, jmax: f64) -> bool {
@@ -452,6 +493,7 @@ impl Executor {
             brake: None,
             input_released: false,
             period: 0.001,
+            caps: Caps::All,
         }
     }
 
@@ -547,8 +589,13 @@ impl Executor {
         self.brake = None;
     }
 
-    /// The speed allowed on `seg` under overrides, hold and single block.
+    /// The speed allowed on `seg` under overrides, hold and single block
+    /// (only the machine's limit when the look ahead meets
+    /// [`Caps::Machine`]).
     fn cap(&self, seg: &Segment) -> f64 {
+        if self.caps == Caps::Machine {
+            return machine_cap(seg);
+        }
         if self.hold {
             return 0.0;
         }
@@ -886,10 +933,9 @@ impl Executor {
             amax = amax.min(seg.max_acceleration);
             jmax = jmax.min(seg.max_jerk);
             // The motion stops before a segment it may not enter moving.
-            let next_cap = q
-                .get(k + 1)
-                .filter(|n| n.is_motion())
-                .map_or(0.0, |n| self.cap(n));
+            // One the operator holds back (hold, a zero override) it may,
+            // if it cannot stop sooner.
+            let next_cap = q.get(k + 1).map_or(0.0, machine_cap);
             if seg.exit_velocity == 0.0 || next_cap == 0.0 {
                 break;
             }
@@ -905,16 +951,15 @@ impl Executor {
         let (amax, jmax) = self.period_limits(q, head, dt);
         let shaped = jmax.is_finite();
 
-        // Feed hold: the shortest stop, played back until released.
+        // Feed hold: the shortest stop, played back until released, where
+        // one fits the segments ahead; otherwise the jerk search brakes
+        // toward rest under every limit (hold caps the speed at zero).
         if self.hold && shaped {
             if !self.brake.is_some_and(|b| b.hold) {
                 if self.v == 0.0 && self.a == 0.0 {
                     return;
                 }
-                if let Some(mut stop) = Brake::shortest(self.v, self.a, 0.0, amax, jmax) {
-                    stop.hold = true;
-                    self.brake = Some(stop);
-                }
+                self.brake = self.hold_stop(q, head, amax, jmax);
             }
             if self.brake.is_some() {
                 return self.play(q, head, dt, consumed);
@@ -1034,20 +1079,22 @@ impl Executor {
                     a < 0.0 && v < a * a / (2.0 * jmax)
                 };
                 if crashes(lo) && !crashes(j_track) {
-                    let mut hi = j_track;
-                    for _ in 0..24 {
-                        let mid = (lo + hi) / 2.0;
-                        if crashes(mid) {
-                            lo = mid;
-                        } else {
-                            hi = mid;
-                        }
-                    }
-                    lo = hi;
+                    lo = narrow(lo, j_track, 24, crashes).1;
                 }
                 lo.min(j_track)
             } else {
                 (-amax - self.a) / dt
+            };
+            const GRID: usize = 16;
+            let grid = |k: usize| j_floor + (j_track - j_floor) * k as f64 / GRID as f64;
+            // The jerks that land the acceleration exactly on a coming
+            // segment's limit, either way.
+            let a_now = self.a;
+            let edges = || {
+                (head..head + EDGE_SEGMENTS)
+                    .map_while(|k| q.get(k).filter(|s| s.is_motion()))
+                    .flat_map(|seg| [-seg.max_acceleration, seg.max_acceleration])
+                    .map(move |edge| (edge - a_now) / dt)
             };
             let mut lo = j_floor;
             let mut hi = j_track;
@@ -1057,8 +1104,6 @@ impl Executor {
                 // with a lower acceleration limit decelerating harder than
                 // it allows. Feasible jerks then lie inside the range, not
                 // at its bottom: look for one, from the top.
-                const GRID: usize = 16;
-                let grid = |k: usize| j_floor + (j_track - j_floor) * k as f64 / GRID as f64;
                 for k in (1..GRID).rev() {
                     if ahead_of(grid(k), self).1.ok {
                         (lo, hi) = (grid(k), grid(k + 1));
@@ -1070,31 +1115,41 @@ impl Executor {
                 // the acceleration exactly on a coming segment's limit (the
                 // edge of braking as hard as that segment allows), which a
                 // grid misses: try those of the segments ahead.
-                for k in head..head + EDGE_SEGMENTS {
-                    let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
-                        break;
-                    };
-                    for edge in [-seg.max_acceleration, seg.max_acceleration] {
-                        let jk = (edge - self.a) / dt;
-                        if jk > lo && jk < j_track && ahead_of(jk, self).1.ok {
-                            (lo, hi) = (jk, jk);
-                            found = true;
-                        }
+                for jk in edges() {
+                    if jk > lo && jk < j_track && ahead_of(jk, self).1.ok {
+                        (lo, hi) = (jk, jk);
+                        found = true;
                     }
                 }
             }
             // An edge found is one jerk (lo = hi): nothing to bisect.
             if found && hi > lo {
-                for _ in 0..16 {
-                    let mid = (lo + hi) / 2.0;
-                    if ahead_of(mid, self).1.ok {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
+                lo = narrow(lo, hi, 16, |j| ahead_of(j, self).1.ok).0;
             }
             j = lo;
+            if !found {
+                // No jerk meets every cap: one the operator set or the
+                // program's feed (a hold, an override cut, a slower feed)
+                // is too close to meet. Those are met late, the machine's
+                // in time: brake as hard as the machine's limits ahead
+                // allow, not harder (into a segment with a lower
+                // acceleration limit, or snapping to rest where the
+                // operator's cap is zero).
+                let mut machine = self.clone();
+                machine.caps = Caps::Machine;
+                let ok = |j: f64| ahead_of(j, &machine).1.ok;
+                if !ok(j_floor) {
+                    let mut best = (1..=GRID)
+                        .find(|&k| ok(grid(k)))
+                        .map(|k| narrow(grid(k), grid(k - 1), 16, ok).0);
+                    for jk in edges() {
+                        if jk > j_floor && best.is_none_or(|b| jk < b) && jk <= j_track && ok(jk) {
+                            best = Some(jk);
+                        }
+                    }
+                    j = best.unwrap_or(j_floor);
+                }
+            }
         }
         let (mut ds, mut v, mut a) = step(j, self);
         if v <= 0.0 {
@@ -1120,6 +1175,63 @@ impl Executor {
             a = 0.0;
         }
         self.travel(q, head, ds, v, a, consumed)
+    }
+
+    /// The shortest stop from the current state that keeps to the limits of
+    /// every segment it crosses: braking under the lowest acceleration and
+    /// jerk limits within its reach, entering each segment within that
+    /// segment's acceleration limit and passing each junction under its
+    /// speed cap. None if there is no such stop (a program stop, or a
+    /// slower junction, comes first): the jerk search then brakes instead.
+    fn hold_stop(&self, q: View, head: usize, amax: f64, jmax: f64) -> Option<Brake> {
+        let (mut amax, mut jmax) = (amax, jmax);
+        let mut stop = Brake::shortest(self.v, self.a, 0.0, amax, jmax)?;
+        // Lower limits within reach lengthen the stop, which may reach
+        // lower ones still: a few rounds settle it.
+        for _ in 0..4 {
+            let reach = stop.length();
+            let (mut a_low, mut j_low) = (amax, jmax);
+            let mut start = -self.s;
+            for k in head..head + LOOK_PAST_REACH {
+                let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
+                    break;
+                };
+                if start > reach {
+                    break;
+                }
+                a_low = a_low.min(seg.max_acceleration);
+                j_low = j_low.min(seg.max_jerk);
+                start += seg.length;
+            }
+            if a_low >= amax && j_low >= jmax {
+                break;
+            }
+            (amax, jmax) = (a_low, j_low);
+            stop = Brake::shortest(self.v, self.a, 0.0, amax, jmax)?;
+        }
+        let reach = stop.length();
+        let mut end = -self.s;
+        for k in head..head + LOOK_PAST_REACH {
+            let seg = q.get(k)?;
+            end += seg.length;
+            if end >= reach {
+                stop.hold = true;
+                return Some(stop);
+            }
+            let next = q.get(k + 1).filter(|n| n.is_motion())?;
+            let (v, a) = stop.state_at_distance(end);
+            let cap = seg.exit_velocity.min(next.max_velocity);
+            if v > cap * (1.0 + 1e-12)
+                || a.abs() > next.max_acceleration * (1.0 + 1e-12)
+                || stop
+                    .phases
+                    .iter()
+                    .any(|p| p.0.abs() > next.max_jerk * (1.0 + 1e-12))
+            {
+                return None;
+            }
+        }
+        None
     }
 
     /// A profile ends at its target at its speed with zero acceleration;
@@ -1171,12 +1283,20 @@ impl Executor {
             if self.s < seg.length {
                 break;
             }
+            // The program's stops are never passed. A zero cap the operator
+            // set (hold, a zero override, single block) stops the motion
+            // here if it arrives at rest, as a planned stop does (within
+            // rounding); motion that could not stop in time goes on into the
+            // next segment, braking, rather than snap to rest.
             let next = q.get(k + 1);
-            let next_cap = next
-                .filter(|n| n.is_motion())
-                .map(|n| self.cap(n))
-                .unwrap_or(0.0);
-            if next_cap == 0.0 {
+            let stops = match next.filter(|n| n.is_motion()) {
+                None => true,
+                Some(n) => {
+                    let creep = 1e-3 * seg.max_jerk.min(n.max_jerk) * self.period;
+                    self.cap(n) == 0.0 && self.v <= creep * self.period && self.a.abs() <= creep
+                }
+            };
+            if stops {
                 self.s = seg.length;
                 self.v = 0.0;
                 self.a = 0.0;
@@ -1490,8 +1610,14 @@ mod simulation {
 
     /// Runs `q` (planned from `text`) to its end: messages naming `case`
     /// if it does not end exactly at `end` (X Y Z) or exceeds a limit.
-    fn judge(q: &mut VecDeque<Segment>, end: [f64; 3], case: &str, text: &str) -> Vec<String> {
-        let out = run(q, |_, _| {});
+    fn judge(
+        q: &mut VecDeque<Segment>,
+        end: [f64; 3],
+        case: &str,
+        text: &str,
+        control: impl FnMut(usize, &mut Executor),
+    ) -> Vec<String> {
+        let out = run(q, control);
         let mut failures = Vec::new();
         let at = out.last().unwrap().position;
         if (0..3).any(|i| (at.to_array()[i] - end[i]).abs() >= 1e-9) {
@@ -1557,7 +1683,7 @@ mod simulation {
                 },
             );
             let case = format!("seed {seed} case {case} (P{tolerance}, rate share {rate_share})");
-            failures.extend(judge(&mut q, [x, y, z], &case, &text));
+            failures.extend(judge(&mut q, [x, y, z], &case, &text, |_, _| {}));
         }
         failures
     }
@@ -1594,18 +1720,23 @@ mod simulation {
         assert!(failures.is_empty(), "{} of 1800 failed", failures.len());
     }
 
-    /// A closed circle of `n` chords at `feed` mm/min, blended within
-    /// `tolerance` mm: the executor's samples as (velocity, acceleration,
-    /// jerk) use of the limits.
-    fn dense_circle(n: usize, feed: f64, tolerance: f64) -> (f64, f64, f64) {
+    /// A circle of radius 20 mm about the origin in `n` chords at `feed`
+    /// mm/min, from and back to (20, 0) after a rapid there.
+    fn circle_of_chords(n: usize, feed: f64) -> String {
         let r = 20.0;
         let mut text = format!("G21 G90\nG0 X{r} Y0\nG1 F{feed}\n");
         for k in 1..=n {
             let a = std::f64::consts::TAU * k as f64 / n as f64;
             text += &format!("X{:.6} Y{:.6}\n", r * a.cos(), r * a.sin());
         }
-        text += "M2\n";
-        let mut q = planned(&text, PathMode::Blend { tolerance });
+        text + "M2\n"
+    }
+
+    /// A closed circle of `n` chords at `feed` mm/min, blended within
+    /// `tolerance` mm: the executor's samples as (velocity, acceleration,
+    /// jerk) use of the limits.
+    fn dense_circle(n: usize, feed: f64, tolerance: f64) -> (f64, f64, f64) {
+        let mut q = planned(&circle_of_chords(n, feed), PathMode::Blend { tolerance });
         let out = run(&mut q, |_, _| {});
         limit_use(&out)
     }
@@ -1854,7 +1985,7 @@ mod simulation {
             let tolerance = [0.005, 0.01, 0.05, 0.5][case % 4];
             let mut q = planned(&text, PathMode::Blend { tolerance });
             let case = format!("seed {seed} case {case} (P{tolerance})");
-            failures.extend(judge(&mut q, end, &case, &text));
+            failures.extend(judge(&mut q, end, &case, &text, |_, _| {}));
         }
         failures
     }
@@ -1885,6 +2016,112 @@ mod simulation {
             .collect();
         for f in &failures {
             eprintln!("{}", f.lines().next().unwrap_or_default());
+        }
+        assert!(failures.is_empty(), "{} of 300 failed", failures.len());
+    }
+
+    /// Feed hold on a circle of 0.05 mm chords: the shortest stop spans
+    /// many of them. Hold made every junction a point to stop at, so the
+    /// motion snapped to rest at the end of the chord it was on (jerk 1955
+    /// times the limit, acceleration 49 times). It now brakes across the
+    /// chords within every limit, rests on the path and resumes.
+    #[test]
+    fn feed_hold_on_dense_chords_brakes_across_them_within_limits() {
+        let r = 20.0;
+        let text = circle_of_chords(2513, 3000.0);
+        for hold_at in [500, 777, 1000] {
+            let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |k, ex| {
+                ex.set_hold((hold_at..hold_at + 300).contains(&k));
+            });
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "hold at tick {hold_at}: v {v} a {a} j {j}"
+            );
+            let (moving, rest) = (out[hold_at], out[hold_at + 250]);
+            assert!(moving.velocity > 40.0, "cutting at {}", moving.velocity);
+            assert_eq!(rest.velocity, 0.0, "held at rest");
+            assert_eq!(
+                rest.position,
+                out[hold_at + 299].position,
+                "still while held"
+            );
+            let off = (rest.position.x.hypot(rest.position.y) - r).abs();
+            assert!(off < 0.01, "rests {off} mm off the circle");
+            let end = out.last().unwrap().position;
+            assert!(
+                (end.x - r).abs() < 1e-9 && end.y.abs() < 1e-9,
+                "ends at {end:?}"
+            );
+        }
+    }
+
+    /// [`mixed_programs`] run by a restless operator: every few hundred
+    /// periods (at random, from `seed`) a feed hold of 50–400 periods, a
+    /// feed override from 0 to 200 % or a rapid override from 0 to 100 %;
+    /// all released after 20 s so the program ends.
+    fn operated_programs(seed: u64, cases: usize) -> Vec<String> {
+        let mut rng = Rng(seed);
+        let mut failures = Vec::new();
+        for case in 0..cases {
+            let (text, end) = mixed_program(&mut rng);
+            let tolerance = [0.005, 0.01, 0.05, 0.5][case % 4];
+            let mut q = planned(&text, PathMode::Blend { tolerance });
+            let mut ops = Rng(seed * 1000 + case as u64);
+            let mut hold_until = 0;
+            let mut log = Vec::new();
+            let case = format!("seed {seed} case {case} (P{tolerance}, operated)");
+            let found = judge(&mut q, end, &case, &text, |n, ex| {
+                if n >= 20_000 {
+                    ex.set_hold(false);
+                    ex.set_feed_override(1.0);
+                    ex.set_rapid_override(1.0);
+                    return;
+                }
+                if ops.next() < 1.0 / 300.0 {
+                    let what = ops.next();
+                    if what < 0.4 {
+                        hold_until = n + 50 + (ops.next() * 350.0) as usize;
+                        log.push(format!("{n}: hold until {hold_until}"));
+                    } else if what < 0.8 {
+                        let f = if ops.next() < 0.2 {
+                            0.0
+                        } else {
+                            ops.next() * 2.0
+                        };
+                        ex.set_feed_override(f);
+                        log.push(format!("{n}: feed {f:.3}"));
+                    } else {
+                        let r = ops.next();
+                        ex.set_rapid_override(r);
+                        log.push(format!("{n}: rapid {r:.3}"));
+                    }
+                }
+                ex.set_hold(n < hold_until);
+            });
+            // The operator's actions, after the first line of each failure.
+            failures.extend(found.into_iter().map(|f| match f.split_once('\n') {
+                Some((first, rest)) => format!("{first}\n{}\n{rest}", log.join(", ")),
+                None => f,
+            }));
+        }
+        failures
+    }
+
+    /// The 300 programs of [`mixed_program_sweep`] under
+    /// [`operated_programs`]: `cargo test --release -p kerf-motion --
+    /// --ignored operated_program_sweep --nocapture`, 11 s. Not yet clean:
+    /// 108 of the 300 exceed a limit (272 before hold and zero overrides
+    /// stopped snapping to rest at junctions).
+    #[test]
+    #[ignore = "long sweep, not yet clean; run on demand"]
+    fn operated_program_sweep() {
+        let failures: Vec<String> = (2..=6)
+            .flat_map(|seed| operated_programs(seed, 60))
+            .collect();
+        for f in &failures {
+            eprintln!("{}", f.lines().take(2).collect::<Vec<_>>().join(" | "));
         }
         assert!(failures.is_empty(), "{} of 300 failed", failures.len());
     }
