@@ -998,7 +998,10 @@ impl Executor {
         // Feed hold: the shortest stop, played back until released, where
         // one fits the segments ahead; otherwise the jerk search brakes
         // toward rest under every limit (hold caps the speed at zero).
-        if self.hold && shaped {
+        // Single block switched on while moving stops the same way, until
+        // the first step.
+        let halting = self.hold || (self.single_block && self.block_line.is_none());
+        if halting && shaped {
             if !self.brake.is_some_and(|b| b.hold) {
                 if self.v == 0.0 && self.a == 0.0 {
                     return;
@@ -2321,5 +2324,64 @@ mod simulation {
             eprintln!("{}", f.lines().take(2).collect::<Vec<_>>().join(" | "));
         }
         assert!(failures.is_empty(), "{} of 300 failed", failures.len());
+    }
+
+    /// Single block switched on while cutting a circle of 0.05 mm chords:
+    /// every segment's cap became zero and the motion stopped under the
+    /// jerk search, running the speed out at the end (jerk 1.13 times the
+    /// limit). It now stops like a feed hold, then each step runs exactly
+    /// one line and stops at its end.
+    #[test]
+    fn single_block_switched_on_while_cutting_stops_within_limits_then_steps_a_line() {
+        let n = 2513;
+        let text = circle_of_chords(n, 3000.0);
+        use std::f64::consts::TAU;
+        for on_at in [500, 777, 1000] {
+            let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |k, ex| {
+                if k == on_at {
+                    ex.set_single_block(true);
+                }
+                if (on_at + 200..on_at + 2000).contains(&k) && (k - on_at) % 100 == 0 {
+                    ex.step();
+                }
+                if k == on_at + 2000 {
+                    ex.set_single_block(false);
+                }
+            });
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "single block at tick {on_at}: v {v} a {a} j {j}"
+            );
+            assert!(
+                out[on_at].velocity > 40.0,
+                "cutting at {}",
+                out[on_at].velocity
+            );
+            assert_eq!(
+                out[on_at + 199].velocity,
+                0.0,
+                "stopped before the first step"
+            );
+            // Each step stops at the same place in the next line: the rest
+            // points are the circle's symmetry apart, one chord's angle
+            // (within the program's 6 decimals).
+            let rest = |step: usize| out[on_at + 199 + 100 * step].position;
+            for step in 1..18 {
+                let (from, to) = (rest(step), rest(step + 1));
+                let turn = (to.y.atan2(to.x) - from.y.atan2(from.x)).rem_euclid(TAU);
+                assert!(
+                    (turn - TAU / n as f64).abs() < 1e-6,
+                    "step {step} turned {turn} rad"
+                );
+                assert!((to.x.hypot(to.y) - from.x.hypot(from.y)).abs() < 1e-5);
+            }
+            let end = out.last().unwrap().position;
+            assert!(
+                (end.x - 20.0).abs() < 1e-9 && end.y.abs() < 1e-9,
+                "ends at {end:?}"
+            );
+        }
     }
 }
