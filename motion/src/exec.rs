@@ -1319,6 +1319,9 @@ impl Executor {
         }
         let (ease, _) = easing(v, a, 0.0, jmax, self.period);
         let mut start = -s_head;
+        // The lowest jerk limit before segment k: easing under it up to k
+        // is the slowest the easing can be, where limits fall in steps.
+        let mut j_before = jmax;
         for k in head..head + LOOK_PAST_REACH {
             let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
                 return false;
@@ -1327,11 +1330,12 @@ impl Executor {
                 return false;
             }
             if k > head
-                && seg.max_jerk < jmax
-                && !eases_before_running_out(v, a, jmax, start, seg.max_jerk, self.period)
+                && seg.max_jerk < j_before
+                && !eases_before_running_out(v, a, j_before, start, seg.max_jerk, self.period)
             {
                 return true;
             }
+            j_before = j_before.min(seg.max_jerk);
             start += seg.length;
         }
         false
@@ -2377,6 +2381,41 @@ mod simulation {
                 );
                 assert!((to.x.hypot(to.y) - from.x.hypot(from.y)).abs() < 1e-5);
             }
+            let end = out.last().unwrap().position;
+            assert!(
+                (end.x - 20.0).abs() < 1e-9 && end.y.abs() < 1e-9,
+                "ends at {end:?}"
+            );
+        }
+    }
+
+    /// A 0 % feed override on a circle of 0.05 mm chords: the jerk search
+    /// brakes toward rest across chords whose jerk limits fall in steps
+    /// (28919, then 26803, 25889, 24769 mm/s³). Checking each lower limit
+    /// against easing under the highest one let the braking ride the edge
+    /// of one limit into the next, lower one, and the speed ran out still
+    /// decelerating (jerk 1.13 and 1.21 times the limit at ticks 777 and
+    /// 850). The easing is now checked under the lowest limit before each
+    /// segment ([`Executor::runs_out`]).
+    #[test]
+    fn a_zero_feed_override_on_dense_chords_stops_within_limits_and_resumes() {
+        let text = circle_of_chords(2513, 3000.0);
+        for at in [500, 777, 850] {
+            let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |k, ex| {
+                ex.set_feed_override(if (at..at + 300).contains(&k) {
+                    0.0
+                } else {
+                    1.0
+                });
+            });
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "0 % at tick {at}: v {v} a {a} j {j}"
+            );
+            assert!(out[at].velocity > 40.0, "cutting at {}", out[at].velocity);
+            assert_eq!(out[at + 250].velocity, 0.0, "at rest under 0 %");
             let end = out.last().unwrap().position;
             assert!(
                 (end.x - 20.0).abs() < 1e-9 && end.y.abs() < 1e-9,
