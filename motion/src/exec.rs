@@ -2268,45 +2268,113 @@ mod simulation {
             }
             let tolerance = [0.005, 0.01, 0.05, 0.5][case % 4];
             let mut q = planned(&text, PathMode::Blend { tolerance });
-            let mut ops = Rng(seed * 1000 + case as u64);
-            let mut hold_until = 0;
-            let mut log = Vec::new();
+            let mut operator = Operator::new(seed * 1000 + case as u64, 300.0);
             let case = format!("seed {seed} case {case} (P{tolerance}, operated)");
-            let found = judge(&mut q, end, &case, &text, |n, ex| {
-                if n >= 20_000 {
-                    ex.set_hold(false);
-                    ex.set_feed_override(1.0);
-                    ex.set_rapid_override(1.0);
-                    return;
-                }
-                if ops.next() < 1.0 / 300.0 {
-                    let what = ops.next();
-                    if what < 0.4 {
-                        hold_until = n + 50 + (ops.next() * 350.0) as usize;
-                        log.push(format!("{n}: hold until {hold_until}"));
-                    } else if what < 0.8 {
-                        let f = if ops.next() < 0.2 {
-                            0.0
-                        } else {
-                            ops.next() * 2.0
-                        };
-                        ex.set_feed_override(f);
-                        log.push(format!("{n}: feed {f:.3}"));
-                    } else {
-                        let r = ops.next();
-                        ex.set_rapid_override(r);
-                        log.push(format!("{n}: rapid {r:.3}"));
-                    }
-                }
-                ex.set_hold(n < hold_until);
-            });
-            // The operator's actions, after the first line of each failure.
-            failures.extend(found.into_iter().map(|f| match f.split_once('\n') {
-                Some((first, rest)) => format!("{first}\n{}\n{rest}", log.join(", ")),
-                None => f,
-            }));
+            let found = judge(&mut q, end, &case, &text, |n, ex| operator.act(n, ex));
+            failures.extend(operator.annotate(found));
         }
         failures
+    }
+
+    /// A restless operator, from a seed: on average every `every` periods
+    /// a feed hold of 50–400 periods, a feed override from 0 to 200 % (0 %
+    /// one time in five) or a rapid override from 0 to 100 %; everything
+    /// released after 20 s so the program ends.
+    struct Operator {
+        rng: Rng,
+        every: f64,
+        hold_until: usize,
+        /// What it did, for failure messages.
+        log: Vec<String>,
+    }
+
+    impl Operator {
+        fn new(seed: u64, every: f64) -> Operator {
+            Operator {
+                rng: Rng(seed),
+                every,
+                hold_until: 0,
+                log: Vec::new(),
+            }
+        }
+
+        /// Act before period `n`.
+        fn act(&mut self, n: usize, ex: &mut Executor) {
+            if n >= 20_000 {
+                ex.set_hold(false);
+                ex.set_feed_override(1.0);
+                ex.set_rapid_override(1.0);
+                return;
+            }
+            if self.rng.next() < 1.0 / self.every {
+                let what = self.rng.next();
+                if what < 0.4 {
+                    self.hold_until = n + 50 + (self.rng.next() * 350.0) as usize;
+                    self.log
+                        .push(format!("{n}: hold until {}", self.hold_until));
+                } else if what < 0.8 {
+                    let f = if self.rng.next() < 0.2 {
+                        0.0
+                    } else {
+                        self.rng.next() * 2.0
+                    };
+                    ex.set_feed_override(f);
+                    self.log.push(format!("{n}: feed {f:.3}"));
+                } else {
+                    let r = self.rng.next();
+                    ex.set_rapid_override(r);
+                    self.log.push(format!("{n}: rapid {r:.3}"));
+                }
+            }
+            ex.set_hold(n < self.hold_until);
+        }
+
+        /// `failures` with what the operator did after each first line.
+        fn annotate(&self, failures: Vec<String>) -> Vec<String> {
+            let log = self.log.join(", ");
+            failures
+                .into_iter()
+                .map(|f| match f.split_once('\n') {
+                    Some((first, rest)) => format!("{first}\n{log}\n{rest}"),
+                    None => f,
+                })
+                .collect()
+        }
+    }
+
+    /// The six circles of [`dense_circles_end_within_limits`] and the
+    /// one of 0.031 mm chords, each under eight [`Operator`]s acting every
+    /// 150 periods on average: `cargo test --release -p kerf-motion --
+    /// --ignored operated_circle_sweep --nocapture`. Not yet clean; see
+    /// docs/motion.md, Known limits.
+    #[test]
+    #[ignore = "long sweep, not yet clean; run on demand"]
+    fn operated_circle_sweep() {
+        let mut failures = Vec::new();
+        for (n, feed, tolerance) in [
+            (300, 3000.0, 0.01),
+            (500, 1000.0, 0.005),
+            (1000, 6000.0, 0.01),
+            (2513, 3000.0, 0.01),
+            (2513, 9000.0, 0.01),
+            (2513, 3000.0, 0.002),
+            (4000, 3000.0, 0.05),
+        ] {
+            let text = circle_of_chords(n, feed);
+            for seed in 1..=8u64 {
+                let mut q = planned(&text, PathMode::Blend { tolerance });
+                let mut operator = Operator::new(seed * 7919 + n as u64, 150.0);
+                let case = format!("{n} chords F{feed} P{tolerance}, operator {seed}");
+                let found = judge(&mut q, [20.0, 0.0, 0.0], &case, &text, |k, ex| {
+                    operator.act(k, ex)
+                });
+                failures.extend(operator.annotate(found));
+            }
+        }
+        for f in &failures {
+            eprintln!("{}", f.lines().take(2).collect::<Vec<_>>().join(" | "));
+        }
+        assert!(failures.is_empty(), "{} of 56 failed", failures.len());
     }
 
     /// The 300 programs of [`mixed_program_sweep`] under
