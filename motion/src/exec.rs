@@ -1021,10 +1021,18 @@ impl Executor {
         // and gains up to J·dt²/8 more speed than the continuous ramp; aim
         // that much low so a speed limit is never exceeded.
         let margin = if shaped { jmax * dt * dt / 8.0 } else { 0.0 };
-        let aim = if target > self.v {
-            (target - margin).max(self.v.min(target))
+        // A junction cap just ahead and only that much lower (the speed
+        // limit of the next chord, a few µm/s under this one's) is too
+        // close in speed for the look ahead to brake for in whole periods:
+        // aim under it too.
+        let reach = 3.0 * self.v * dt;
+        let aim_cap = self
+            .caps_near(q, head, reach, target - 2.0 * margin)
+            .min(target);
+        let aim = if aim_cap > self.v {
+            (aim_cap - margin).max(self.v.min(aim_cap))
         } else {
-            target
+            aim_cap
         };
         let a_want = tracking_acceleration(self.v, self.a, aim, dt, amax, jmax);
         let step = |j: f64, s: &Self| {
@@ -1339,6 +1347,32 @@ impl Executor {
             start += seg.length;
         }
         false
+    }
+
+    /// The lowest junction cap at or above `floor` among the junctions
+    /// within `reach` of the current position (infinite if none): caps
+    /// lower than `floor` are the look ahead's to brake for.
+    fn caps_near(&self, q: View, head: usize, reach: f64, floor: f64) -> f64 {
+        let mut lowest = f64::INFINITY;
+        let mut end = -self.s;
+        for k in head..head + EDGE_SEGMENTS {
+            let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
+                break;
+            };
+            end += seg.length;
+            if end > reach {
+                break;
+            }
+            let next_cap = q
+                .get(k + 1)
+                .filter(|n| n.is_motion())
+                .map_or(0.0, |n| self.cap(n));
+            let junction = seg.exit_velocity.min(self.cap(seg)).min(next_cap);
+            if junction >= floor {
+                lowest = lowest.min(junction);
+            }
+        }
+        lowest
     }
 
     /// The look ahead from the state one period further along profile `p`,
@@ -2483,6 +2517,30 @@ mod simulation {
                 (end.x - 20.0).abs() < 1e-9 && end.y.abs() < 1e-9,
                 "ends at {end:?}"
             );
+        }
+    }
+
+    /// At 200 % the speed on a circle of 1000 chords rides the machine's
+    /// limit, which differs from chord to chord by a few µm/s (100.0005,
+    /// then 100.0000 mm/s where a chord runs along an axis). Tracking aimed
+    /// under the current chord's limit only; the next, slightly lower one
+    /// was too close in speed for the look ahead to brake for in whole
+    /// periods, and an axis ran 3–5 ppm over its limit. Tracking now aims
+    /// under such junction caps just ahead too.
+    #[test]
+    fn riding_the_speed_limit_aims_under_a_slightly_lower_limit_just_ahead() {
+        let text = circle_of_chords(1000, 6000.0);
+        for seed in [1, 3, 5, 7] {
+            let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+            // The operated circle sweep's operators that found it.
+            let mut operator = Operator::new(seed * 7919 + 1000, 150.0);
+            let out = run(&mut q, |k, ex| operator.act(k, ex));
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "operator {seed}: v {v} a {a} j {j}"
+            );
+            assert!(v > 0.9999, "rides the limit: {v}");
         }
     }
 }
