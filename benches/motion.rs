@@ -293,11 +293,12 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics) {
     let [av, aa, aj] = worst(&report.axes);
     let [jv, ja, jj] = worst(&report.joints);
     println!(
-        "{name:<33} {:>9.3} s {:>9.3} s {:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s",
+        "{name:<33} {:>9.3} s {:>9.3} s {:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s {:>8}",
         report.cycle_time,
         bound,
         report.cycle_time / bound,
         report.max_deviation,
+        report.guard_takeovers,
     );
 }
 
@@ -322,9 +323,9 @@ fn main() {
     println!("deviation from the programmed path; largest use of the axis and joint");
     println!("velocity, acceleration and jerk limits (must stay <= 1 + 1e-6)");
     println!(
-        "{:<33} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8}",
+        "{:<33} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8} {:>8}",
         "program", "planned", "bound", "ratio", "poly", "deviation",
-        "ax v", "ax a", "ax j", "jt v", "jt a", "jt j", "run", "bound"
+        "ax v", "ax a", "ax j", "jt v", "jt a", "jt j", "run", "bound", "guarded"
     );
     quality("circle R20, 0.05 mm chords", &circle_small_segments(), kins);
     quality("zig-zag pocket 60x40", &zigzag_pocket(), kins);

@@ -515,6 +515,7 @@ impl Shared {
                 period_us: self.period_us,
                 ticks: snap.ticks,
                 overruns: snap.overruns,
+                guard_takeovers: snap.guard_takeovers,
                 clock: match self.pacing {
                     Pacing::Wall => "wall",
                     Pacing::Virtual => "virtual",

@@ -367,6 +367,10 @@ pub struct ServoStatus {
     pub ticks: u64,
     /// Wake-ups a whole period or more late.
     pub overruns: u64,
+    /// Servo periods in which the executor followed its guard, a checked
+    /// way to rest, because the motion its search chose had none.
+    #[serde(default)]
+    pub guard_takeovers: u64,
     /// `wall` (real time) or `virtual` (`kerfd --virtual-clock`).
     pub clock: String,
     /// Running under SCHED_FIFO.

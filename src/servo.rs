@@ -124,6 +124,10 @@ pub struct Snapshot {
     pub ticks: u64,
     /// Wake-ups that came a whole period or more late.
     pub overruns: u64,
+    /// Periods in which the executor followed its guard (a checked way to
+    /// rest) instead of the state its search chose
+    /// ([`Executor::guard_takeovers`](kerf_motion::Executor::guard_takeovers)).
+    pub guard_takeovers: u64,
     /// A segment is in progress.
     pub moving: bool,
     /// Source line of the current (or last) segment.
@@ -178,6 +182,7 @@ impl Snapshot {
         Snapshot {
             ticks: 0,
             overruns: 0,
+            guard_takeovers: 0,
             moving: false,
             line: 0,
             program_done: 0,
@@ -523,6 +528,7 @@ impl ServoTick {
         snap.hold = self.executor.is_held();
         snap.feed_override = self.executor.feed_override();
         snap.rapid_override = self.executor.rapid_override();
+        snap.guard_takeovers = self.executor.guard_takeovers();
         // A fault or e-stop disables the drives: they hold where they are.
         self.setpoints.enable = active && snap.fault.is_none();
         self.inner_loop(n);

@@ -2335,12 +2335,12 @@ mod simulation {
 
     /// 300 programs with arcs, helices and dense curves (seeds 2–6, 60
     /// each): `cargo test --release -p kerf-motion -- --ignored
-    /// mixed_program_sweep --nocapture`, 9 s. Not yet clean: 8 of the 300
-    /// exceed the jerk limit (1.16–5.7 times), 33 before
-    /// `eases_in_time`, 11 before `runs_out`; see docs/motion.md, Known
-    /// limits.
+    /// mixed_program_sweep --nocapture`, 9 s in a release build. All pass
+    /// since the guard (`guard.rs`); 8 of the 300 exceeded the jerk limit
+    /// before it (1.16–5.7 times), 11 before `runs_out`, 33 before
+    /// `eases_in_time`.
     #[test]
-    #[ignore = "long sweep, not yet clean; run on demand"]
+    #[ignore = "long sweep; run on demand"]
     fn mixed_program_sweep() {
         let failures: Vec<String> = (2..=6)
             .flat_map(|seed| mixed_programs(seed, 60, &|_| true))
@@ -2588,9 +2588,10 @@ mod simulation {
 
     /// The 300 programs of [`mixed_program_sweep`] under
     /// [`operated_programs`]: `cargo test --release -p kerf-motion --
-    /// --ignored operated_program_sweep --nocapture`, 11 s. Not yet clean:
-    /// 8 of the 300 exceed a limit, 6 of them programs that fail without
-    /// an operator too (272 before hold and zero overrides
+    /// --ignored operated_program_sweep --nocapture`, 11 s in a release
+    /// build. All pass since the guard (`guard.rs`); 8 of the 300 exceeded
+    /// a limit before it, 6 of them programs that failed without an
+    /// operator too (272 before hold and zero overrides
     /// stopped snapping to rest at junctions, 108 before approaches were
     /// checked every period and easing counted lower jerk limits ahead, 83
     /// before stops braking from above a lowered cap were kept, 75 before
@@ -2600,7 +2601,7 @@ mod simulation {
     /// start above a lowered cap, 27 before the fallback searched up to
     /// the jerk limit).
     #[test]
-    #[ignore = "long sweep, not yet clean; run on demand"]
+    #[ignore = "long sweep; run on demand"]
     fn operated_program_sweep() {
         let failures: Vec<String> = (2..=6)
             .flat_map(|seed| operated_programs(seed, 60, &|_| true))

@@ -106,6 +106,10 @@ pub struct Report {
     pub points: Vec<Point>,
     /// The programmed path as polylines of XYZ points (for plots).
     pub programmed: Vec<[f64; 3]>,
+    /// Servo periods in which the executor followed its guard because the
+    /// state its search chose had no checked way to rest
+    /// ([`Executor::guard_takeovers`]).
+    pub guard_takeovers: u64,
 }
 
 impl Report {
@@ -428,6 +432,7 @@ pub fn run(
             break;
         }
     }
+    report.guard_takeovers = executor.guard_takeovers();
     if config.record > 0 && !all_points.is_empty() {
         let step = (all_points.len() / config.record).max(1);
         report.points = all_points.iter().step_by(step).copied().collect();

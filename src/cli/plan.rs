@@ -170,6 +170,7 @@ pub fn plan(
                 "max_deviation_mm": report.max_deviation,
                 "max_limit_ratio": report.max_limit_ratio(),
                 "segments": report.segments,
+                "guard_takeovers": report.guard_takeovers,
                 "axes": uses(&report.axes),
                 "joints": uses(&report.joints),
             })
@@ -193,6 +194,7 @@ fn print_report(machine: &str, report: &Report) -> std::io::Result<()> {
         report.max_deviation, report.max_deviation_at.1, report.max_deviation_at.0
     )?;
     writeln!(out, "max limit use    {:.6}", report.max_limit_ratio())?;
+    writeln!(out, "guard takeovers  {}", report.guard_takeovers)?;
     writeln!(out)?;
     writeln!(
         out,

@@ -60,8 +60,8 @@ pub fn status(socket: &Path, json: bool, latency: bool) -> Result<(), Failure> {
     }
     let s = &status.servo;
     println!(
-        "servo     {} µs, {} ticks, {} overruns, {} clock",
-        s.period_us, s.ticks, s.overruns, s.clock
+        "servo     {} µs, {} ticks, {} overruns, {} clock, {} guard takeovers",
+        s.period_us, s.ticks, s.overruns, s.clock, s.guard_takeovers
     );
     if latency {
         let l = &s.latency;
