@@ -381,6 +381,9 @@ impl Path<'_> {
                         return Err(Miss::Speed { at: start, cap });
                     }
                 }
+            } else if from == 0.0 && brake.v0 > seg.max_velocity * slack {
+                // The state asked about is over the limit of its segment.
+                return Err(Miss::Other);
             }
             if let Some((at, v)) = crest {
                 if at >= lo && at <= hi && v > seg.max_velocity * slack {
