@@ -231,14 +231,15 @@ impl Path<'_> {
     /// the queue, a dwell, a stop, an I/O point) or the look gives out.
     fn segments(&self) -> impl Iterator<Item = (f64, Option<&super::Segment>)> + '_ {
         let mut start = -self.s_head;
-        (self.head..self.head + REACH)
-            .map(move |k| {
-                let seg = self.q.get(k).filter(|s| s.is_motion());
-                let here = start;
-                start += seg.map_or(0.0, |s| s.length);
-                (here, seg)
-            })
-            .chain(std::iter::once((f64::INFINITY, None)))
+        let last = self.head + REACH;
+        // Past the last segment looked at the motion must be at rest, as at
+        // the end of the queue: a stop that would go on is not checked.
+        (self.head..=last).map(move |k| {
+            let seg = self.q.get(k).filter(|s| s.is_motion() && k < last);
+            let here = start;
+            start += seg.map_or(0.0, |s| s.length);
+            (here, seg)
+        })
     }
 
     /// The lowest acceleration and jerk limits of the segments touching
@@ -542,6 +543,27 @@ mod tests {
             travelled > line.length - s0,
             "went on past the cap: {travelled}"
         );
+    }
+
+    #[test]
+    fn a_stop_longer_than_the_segments_looked_at_has_no_guard() {
+        // 0.001 mm pieces of a line (the guard reads only lengths and
+        // limits): a stop from 100 mm/s crosses 6000 of them, more than
+        // it may look at, so it has no guard; from 10 mm/s it crosses 70.
+        let line = planned("G1 X20 F6000\nM2\n", PathMode::ExactStop)[0];
+        let piece = Segment {
+            length: 0.001,
+            exit_velocity: line.max_velocity,
+            ..line
+        };
+        let q = vec![piece; 2 * REACH];
+        let view = View {
+            head: &q,
+            tail: &[],
+        };
+        assert!(Guard::find(view, 0, 0.0, 100.0, 0.0).is_none());
+        let guard = Guard::find(view, 0, 0.0, 10.0, 0.0).expect("a short stop");
+        follow(&q, 0.0, guard);
     }
 
     #[test]
