@@ -513,6 +513,12 @@ fn machine_cap(seg: &Segment) -> f64 {
     }
 }
 
+/// The machine's speed limit entering the segment after `k` of `q`: zero
+/// at the end of the queue or before a marker.
+fn machine_cap_after(q: View, k: usize) -> f64 {
+    q.get(k + 1).map_or(0.0, machine_cap)
+}
+
 /// Whether motion at speed `v` and acceleration `a` stays within `cap`
 /// even if the acceleration is eased off at once with jerk `jmax`.
 fn within_cap(v: f64, a: f64, cap: f64, jmax: f64) -> bool {
@@ -1095,6 +1101,11 @@ impl Executor {
         };
         let ahead_of = |j: f64, s: &Self| {
             let (ds, v, a) = step(j, s);
+            // A junction this period crosses is behind the state the look
+            // ahead starts from: its cap is checked on the step itself.
+            if !s.crosses_within_caps(q, head, ds, v, a) {
+                return (ds, Ahead::blocked());
+            }
             (ds, s.look_ahead(q, head, s.s + ds.max(0.0), v.max(0.0), a))
         };
         let j_track = ((a_want - self.a) / dt).clamp(-jmax, jmax);
@@ -1327,7 +1338,11 @@ impl Executor {
     /// Takes the state `ds` further on at speed `v` and acceleration `a` if
     /// a guard from it exists (`guard.rs`); otherwise follows the guard.
     fn commit(&mut self, q: View, head: usize, ds: f64, v: f64, a: f64, consumed: &mut usize) {
-        match Guard::find(q, head, self.s + ds, v.max(0.0), a) {
+        let found = self
+            .crosses_within_caps(q, head, ds, v, a)
+            .then(|| Guard::find(q, head, self.s + ds, v.max(0.0), a))
+            .flatten();
+        match found {
             Some(guard) => {
                 self.guard = Some(guard);
                 self.travel(q, head, ds, v, a, consumed);
@@ -1337,6 +1352,45 @@ impl Executor {
             }
             None => self.follow_guard(q, head, ds, v, a, consumed),
         }
+    }
+
+    /// Whether the step `ds` further on, to speed `v1` and acceleration
+    /// `a1` with constant jerk over the period, passes every junction it
+    /// crosses under the junction's machine cap: a guard checks the way on
+    /// from where a step ends, not the junctions the step itself crosses
+    /// (a creep toward a program's stop must not cross it still moving).
+    fn crosses_within_caps(&self, q: View, head: usize, ds: f64, v1: f64, a1: f64) -> bool {
+        let (v0, a0, dt) = (self.v, self.a, self.period);
+        let j = (a1 - a0) / dt;
+        let travelled = |t: f64| v0 * t + a0 * t * t / 2.0 + j * t * t * t / 6.0;
+        let fastest = v0.max(v1).max(if a0 > 0.0 && a1 < 0.0 {
+            v0 - a0 * a0 / (2.0 * j)
+        } else {
+            0.0
+        });
+        let mut end = -self.s;
+        for k in head..head + LOOK_PAST_REACH {
+            let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
+                return true;
+            };
+            end += seg.length;
+            if end >= ds {
+                return true;
+            }
+            if end <= 0.0 {
+                continue;
+            }
+            let cap = seg.exit_velocity.min(self::machine_cap_after(q, k));
+            if cap >= fastest * (1.0 + 1e-12) {
+                continue;
+            }
+            let (t, _) = narrow(0.0, dt, 60, |t| travelled(t) <= end);
+            let speed = v0 + a0 * t + j * t * t / 2.0;
+            if speed > cap * (1.0 + 1e-12) + 1e-9 {
+                return false;
+            }
+        }
+        true
     }
 
     /// Follows the guard from the current state one period on, instead of
@@ -2297,6 +2351,11 @@ mod simulation {
             ],
         );
         passes(operated_programs, &[(6, 48), (2, 41)]);
+        // Released from a hold at rest a hair short of a program's stop,
+        // the motion crept on and crossed the stop still moving: a guard
+        // checks from where a step ends, so the junctions a step crosses
+        // are checked on the step (`Executor::crosses_within_caps`).
+        passes(operated_programs, &[(16, 47)]);
     }
 
     /// Speeding up into a blend with a lower speed limit: the look ahead

@@ -21,11 +21,12 @@
 //! overrides, single block) and the programmed feed are the search's to
 //! meet; a guard brakes below them anyway.
 
-use super::{Brake, View};
+use super::{narrow, Brake, View};
 
-/// Profiles in a guard at most: a stop, and before it aims at the speed
-/// caps the stop alone would pass too fast.
-const LEGS: usize = 4;
+/// Profiles in a guard at most: easing a positive acceleration off, a
+/// stop, and before it aims at the speed caps the stop alone would pass
+/// too fast.
+const LEGS: usize = 8;
 
 /// Segments a guard may cross (a stop from 100 mm/s over 0.01 mm chords
 /// crosses about 500).
@@ -118,15 +119,19 @@ impl Guard {
             // jerk limits of the short stretch that takes. A stop under the
             // lowest limits of its whole reach would ease it under a blend's
             // far lower jerk limit further on, cresting far above the caps.
-            let ease = path.ease(v, a)?;
-            path.check(0.0, &ease, ease.length()).ok()?;
-            guard.legs[0] = Leg {
-                brake: ease,
-                start: 0.0,
-                from: 0.0,
-            };
-            guard.n = 1;
-            (from, v, a, start) = (ease.length(), ease.v1, 0.0, ease.duration());
+            let easing = path.ease(v, a)?;
+            for &ease in &easing.legs[..easing.n] {
+                let length = ease.length();
+                path.check(from, &ease, from + length).ok()?;
+                guard.legs[guard.n] = Leg {
+                    brake: ease,
+                    start,
+                    from,
+                };
+                guard.n += 1;
+                (from, start) = (from + length, start + ease.duration());
+            }
+            (v, a) = (easing.crest, 0.0);
         }
         loop {
             let stop = path.lowest_stop(from, v, a)?;
@@ -189,7 +194,7 @@ fn stop(v: f64, a: f64, amax: f64, jmax: f64) -> Option<Brake> {
 /// once, `s_head` mm into segment `head` of `q` at speed `v`, under the
 /// lowest jerk limit within its reach (as a guard does; `v` itself if `a`
 /// ≤ 0), with the lowest `cap` and the lowest machine speed limit of the
-/// segments it touches on the way.
+/// segments it touches on the way and of the junctions it passes.
 pub(super) fn crest(
     q: View,
     head: usize,
@@ -200,7 +205,7 @@ pub(super) fn crest(
 ) -> (f64, f64, f64) {
     let path = Path { q, head, s_head };
     let (crest, reach) = match (a > 0.0).then(|| path.ease(v, a)).flatten() {
-        Some(ease) => (ease.v1, ease.length()),
+        Some(easing) => (easing.crest, easing.length),
         None => (v, 0.0),
     };
     let (mut lowest, mut machine) = (f64::INFINITY, f64::INFINITY);
@@ -209,12 +214,32 @@ pub(super) fn crest(
         if start >= reach - AT_REST && start > 0.0 {
             break;
         }
-        if start + seg.length > 0.0 {
+        let end = start + seg.length;
+        if end > 0.0 {
             lowest = lowest.min(cap(seg));
             machine = machine.min(seg.max_velocity);
         }
+        // A junction passed while still speeding up.
+        if end > 0.0 && end < reach {
+            lowest = lowest.min(seg.exit_velocity);
+            machine = machine.min(seg.exit_velocity);
+        }
     }
     (crest, lowest, machine)
+}
+
+/// Profiles easing a positive acceleration off at most (the jerk limit
+/// falling at each of their junctions).
+const EASE_LEGS: usize = 4;
+
+/// Easing a positive acceleration off, segment by segment.
+struct Easing {
+    legs: [Brake; EASE_LEGS],
+    n: usize,
+    /// The speed it ends at, mm/s.
+    crest: f64,
+    /// Its length, mm.
+    length: f64,
 }
 
 /// The queue as a guard reads it: distances are from the state asked
@@ -278,24 +303,35 @@ impl Path<'_> {
         Some(stop)
     }
 
-    /// Easing acceleration `a` > 0 at speed `v` off to zero, from the
-    /// state asked about, under the lowest jerk limit within its reach.
-    fn ease(&self, v: f64, a: f64) -> Option<Brake> {
+    /// Easing acceleration `a` > 0 at speed `v` off to zero at once, from
+    /// the state asked about, under each segment's jerk limit in turn: a
+    /// profile of constant jerk up to each junction where the limit falls,
+    /// and the last one to zero acceleration. Where the limit falls more
+    /// often than [`EASE_LEGS`] allows (chords whose limits differ a
+    /// little from one to the next), in one profile under the lowest limit
+    /// within its reach.
+    fn ease(&self, v: f64, a: f64) -> Option<Easing> {
+        self.ease_in_steps(v, a)
+            .or_else(|| self.ease_under_lowest(v, a))
+    }
+
+    /// [`ease`](Self::ease) in one profile under the lowest jerk limit
+    /// within its reach.
+    fn ease_under_lowest(&self, v: f64, a: f64) -> Option<Easing> {
         let profile = |jmax: f64| {
             let t = a / jmax;
-            let crest = v + a * t / 2.0;
             Brake {
                 v0: v,
                 a0: a,
-                v1: crest,
-                phases: [(-jmax, t), (0.0, 0.0), (jmax, 0.0)],
+                v1: v + a * t / 2.0,
+                phases: [(-jmax, t), (0.0, 0.0), (0.0, 0.0)],
                 t: 0.0,
                 hold: false,
             }
         };
         let (_, mut jmax) = self.lowest_limits(0.0, 0.0);
         let mut ease = profile(jmax);
-        for _ in 0..4 {
+        for _ in 0..16 {
             let (_, j_low) = self.lowest_limits(0.0, ease.length());
             if j_low >= jmax {
                 break;
@@ -303,7 +339,66 @@ impl Path<'_> {
             jmax = j_low;
             ease = profile(jmax);
         }
-        jmax.is_finite().then_some(ease)
+        jmax.is_finite().then(|| Easing {
+            legs: [ease; EASE_LEGS],
+            n: 1,
+            crest: ease.v1,
+            length: ease.length(),
+        })
+    }
+
+    /// [`ease`](Self::ease) a profile per jerk limit, if there are at most
+    /// [`EASE_LEGS`] of them.
+    fn ease_in_steps(&self, v: f64, a: f64) -> Option<Easing> {
+        let piece = |v: f64, a: f64, jmax: f64, t: f64| Brake {
+            v0: v,
+            a0: a,
+            v1: v + a * t - jmax * t * t / 2.0,
+            phases: [(-jmax, t), (0.0, 0.0), (0.0, 0.0)],
+            t: 0.0,
+            hold: false,
+        };
+        let mut easing = Easing {
+            legs: [piece(v, a, 1.0, 0.0); EASE_LEGS],
+            n: 0,
+            crest: v,
+            length: 0.0,
+        };
+        let (mut from, mut v, mut a) = (0.0, v, a);
+        while easing.n < EASE_LEGS {
+            let (_, jmax) = self.lowest_limits(from, from);
+            if !jmax.is_finite() {
+                return None;
+            }
+            let t = a / jmax;
+            let reach = v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0;
+            // The first junction within reach where the jerk limit falls.
+            let falls = self
+                .segments()
+                .map_while(|(start, seg)| Some((start, seg?)))
+                .take_while(|&(start, _)| start < from + reach)
+                .find(|&(start, seg)| start > from && seg.max_jerk < jmax)
+                .map(|(start, _)| start);
+            let Some(at) = falls else {
+                let last = piece(v, a, jmax, t);
+                easing.legs[easing.n] = last;
+                easing.n += 1;
+                easing.crest = last.v1;
+                easing.length = from + reach;
+                return Some(easing);
+            };
+            // Up to there under this limit: s(τ) = at − from, s rising
+            // while the acceleration is still positive.
+            let to = at - from;
+            let travelled = |tau: f64| v * tau + a * tau * tau / 2.0 - jmax * tau * tau * tau / 6.0;
+            let (tau, _) = narrow(0.0, t, 60, |tau| travelled(tau) <= to);
+            let part = piece(v, a, jmax, tau);
+            easing.legs[easing.n] = part;
+            easing.n += 1;
+            // On from the junction itself, under the lower limit after it.
+            (from, v, a) = (at, part.v1, a - jmax * tau);
+        }
+        None
     }
 
     /// Checks `brake`, starting `from` mm ahead and holding its final speed
@@ -327,8 +422,9 @@ impl Path<'_> {
             .filter(|p| p.1 > 0.0)
             .fold(0.0, |m: f64, p| m.max(p.0.abs()));
         // A positive acceleration still raises the speed to a crest.
+        // (A piece of an easing may end before its crest: then its end.)
         let crest = (brake.a0 > 0.0).then(|| {
-            let t = brake.a0 / brake.phases[0].0.abs();
+            let t = (brake.a0 / brake.phases[0].0.abs()).min(brake.duration());
             let (s, v, _) = brake.at(t);
             (from + s, v)
         });
@@ -446,9 +542,10 @@ mod tests {
     /// by period to rest, and checks each period by sampling, apart from
     /// the closed forms the guard was checked with: speed within the
     /// segment's limit and the junction caps passed, acceleration within
-    /// the limits of the segments the period touches, jerk (the change of
-    /// acceleration over the period) within theirs, and rest before the
-    /// end of the queue. Returns the distance travelled.
+    /// the limit of the segment it ends in, jerk (the change of
+    /// acceleration over the period, an average of the jerk on each
+    /// segment the period touches) within the highest of their limits, and
+    /// rest before the end of the queue. Returns the distance travelled.
     fn follow(q: &[Segment], s0: f64, mut guard: Guard) -> f64 {
         let dt = 0.001;
         let starts: Vec<f64> = q
@@ -465,11 +562,15 @@ mod tests {
         for _ in 0..100_000 {
             let (ds, v1, a1) = guard.step(dt);
             let (k0, k1) = (index(s), index((s + ds).min(total)));
+            let slack = 1.0 + 1e-9;
+            let jmax = q[k0..=k1]
+                .iter()
+                .map(|seg| seg.max_jerk)
+                .fold(0.0, f64::max);
+            assert!((a1 - a).abs() <= jmax * dt * slack, "jerk in {k0}..={k1}");
+            assert!(a1.abs() <= q[k1].max_acceleration * slack, "a {a1} in {k1}");
             for k in k0..=k1 {
                 let seg = &q[k];
-                let slack = 1.0 + 1e-9;
-                assert!(a1.abs() <= seg.max_acceleration * slack, "a {a1} in {k}");
-                assert!((a1 - a).abs() <= seg.max_jerk * dt * slack, "jerk in {k}");
                 if k > k0 {
                     // Crossed into k: the speed there lies between v and
                     // v1 (it falls, but for a crest).
@@ -543,6 +644,40 @@ mod tests {
             travelled > line.length - s0,
             "went on past the cap: {travelled}"
         );
+    }
+
+    #[test]
+    fn speeding_up_into_lower_limits_eases_under_each_segments_jerk_limit() {
+        // The line (1000 mm/s², 50,000 mm/s³) runs into a transition with
+        // lower limits (748 mm/s², 23,847 mm/s³). Accelerating at 1000
+        // mm/s² at 30 mm/s, 0.25 mm before it, easing under the line's
+        // jerk limit gets below 748 in time; under the transition's all the
+        // way it does not.
+        let q = planned(
+            "G1 X20 F6000\nG2 X20 Y-20 J-10\nM2\n",
+            PathMode::Blend { tolerance: 0.01 },
+        );
+        let (line, next) = (&q[0], &q[1]);
+        assert!(next.max_acceleration < 0.8 * line.max_acceleration);
+        assert!(next.max_jerk < 0.5 * line.max_jerk);
+        let view = View {
+            head: &q,
+            tail: &[],
+        };
+        let s0 = line.length - 0.25;
+        let path = Path {
+            q: view,
+            head: 0,
+            s_head: s0,
+        };
+        let (v, a) = (30.0, line.max_acceleration);
+        let uniform = path.ease_under_lowest(v, a).unwrap();
+        let length = uniform.length;
+        assert!(path.check(0.0, &uniform.legs[0], length).is_err());
+        let stepped = path.ease(v, a).unwrap();
+        assert_eq!(stepped.n, 2);
+        let guard = Guard::find(view, 0, s0, v, a).expect("eases in time");
+        follow(&q, s0, guard);
     }
 
     #[test]
