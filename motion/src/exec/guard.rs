@@ -21,7 +21,7 @@
 //! overrides, single block) and the programmed feed are the search's to
 //! meet; a guard brakes below them anyway.
 
-use super::{narrow, Brake, View};
+use super::{Brake, View};
 
 /// Profiles in a guard at most: easing a positive acceleration off, a
 /// stop, and before it aims at the speed caps the stop alone would pass
@@ -228,6 +228,33 @@ pub(super) fn crest(
     (crest, lowest, machine)
 }
 
+/// The time constant jerk `-jmax` from speed `v` and acceleration `a` > 0
+/// takes to travel `to` mm, not more (within the easing, where the speed
+/// rises): safeguarded Newton steps on the cubic.
+fn time_to(v: f64, a: f64, jmax: f64, to: f64) -> f64 {
+    let travelled = |t: f64| v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0;
+    let (mut lo, mut hi) = (0.0, a / jmax);
+    let mut t = if v > 0.0 { (to / v).min(hi) } else { hi / 2.0 };
+    for _ in 0..40 {
+        let err = travelled(t) - to;
+        if err > 0.0 {
+            hi = t;
+        } else {
+            lo = t;
+            if err > -1e-15 * to.max(1e-9) {
+                break;
+            }
+        }
+        let newton = t - err / (v + a * t - jmax * t * t / 2.0);
+        t = if newton > lo && newton < hi {
+            newton
+        } else {
+            (lo + hi) / 2.0
+        };
+    }
+    lo
+}
+
 /// Profiles easing a positive acceleration off at most (the jerk limit
 /// falling at each of their junctions).
 const EASE_LEGS: usize = 4;
@@ -364,41 +391,46 @@ impl Path<'_> {
             crest: v,
             length: 0.0,
         };
+        let (_, mut jmax) = self.lowest_limits(0.0, 0.0);
+        if !jmax.is_finite() {
+            return None;
+        }
         let (mut from, mut v, mut a) = (0.0, v, a);
-        while easing.n < EASE_LEGS {
-            let (_, jmax) = self.lowest_limits(from, from);
-            if !jmax.is_finite() {
+        let reach = |v: f64, a: f64, jmax: f64| {
+            let t = a / jmax;
+            v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0
+        };
+        // One pass over the segments ahead: a piece ends at each junction
+        // within reach where the jerk limit falls.
+        for (start, seg) in self.segments() {
+            let Some(seg) = seg else { break };
+            if start <= from {
+                continue;
+            }
+            if from + reach(v, a, jmax) <= start {
+                break;
+            }
+            if seg.max_jerk >= jmax {
+                continue;
+            }
+            if easing.n + 1 == EASE_LEGS {
                 return None;
             }
-            let t = a / jmax;
-            let reach = v * t + a * t * t / 2.0 - jmax * t * t * t / 6.0;
-            // The first junction within reach where the jerk limit falls.
-            let falls = self
-                .segments()
-                .map_while(|(start, seg)| Some((start, seg?)))
-                .take_while(|&(start, _)| start < from + reach)
-                .find(|&(start, seg)| start > from && seg.max_jerk < jmax)
-                .map(|(start, _)| start);
-            let Some(at) = falls else {
-                let last = piece(v, a, jmax, t);
-                easing.legs[easing.n] = last;
-                easing.n += 1;
-                easing.crest = last.v1;
-                easing.length = from + reach;
-                return Some(easing);
-            };
-            // Up to there under this limit: s(τ) = at − from, s rising
+            // Up to there under this limit: s(τ) = start − from, s rising
             // while the acceleration is still positive.
-            let to = at - from;
-            let travelled = |tau: f64| v * tau + a * tau * tau / 2.0 - jmax * tau * tau * tau / 6.0;
-            let (tau, _) = narrow(0.0, t, 60, |tau| travelled(tau) <= to);
+            let tau = time_to(v, a, jmax, start - from);
             let part = piece(v, a, jmax, tau);
             easing.legs[easing.n] = part;
             easing.n += 1;
             // On from the junction itself, under the lower limit after it.
-            (from, v, a) = (at, part.v1, a - jmax * tau);
+            (from, v, a, jmax) = (start, part.v1, a - jmax * tau, seg.max_jerk);
         }
-        None
+        let last = piece(v, a, jmax, a / jmax);
+        easing.legs[easing.n] = last;
+        easing.n += 1;
+        easing.crest = last.v1;
+        easing.length = from + reach(v, a, jmax);
+        Some(easing)
     }
 
     /// Checks `brake`, starting `from` mm ahead and holding its final speed
