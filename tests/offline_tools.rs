@@ -79,6 +79,8 @@ fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
     // A straight move: any deviation is floating-point rounding.
     assert!(json["max_deviation_mm"].as_f64().unwrap() < 1e-12);
     assert_eq!(json["segments"], 1);
+    // One straight move: the executor's search never needs its guard.
+    assert_eq!(json["guard_takeovers"], 0);
 }
 
 #[test]
