@@ -10,6 +10,11 @@
 //! feed override, feed hold and abort take effect within one period and
 //! always decelerate along the path.
 //!
+//! That search decides how fast the motion goes; the guard (`guard.rs`)
+//! makes it stay within the machine's limits: a state is taken only with a
+//! checked way to rest from it, and otherwise the motion follows the one it
+//! has.
+//!
 //! Real-time safe: [`Executor::tick`] reads the queue in place (two slices,
 //! the halves of a ring buffer), allocates nothing and takes no lock.
 
@@ -1027,7 +1032,7 @@ impl Executor {
             // The motion stops before a segment it may not enter moving.
             // One the operator holds back (hold, a zero override) it may,
             // if it cannot stop sooner.
-            let next_cap = q.get(k + 1).map_or(0.0, machine_cap);
+            let next_cap = machine_cap_after(q, k);
             if seg.exit_velocity == 0.0 || next_cap == 0.0 {
                 break;
             }
@@ -1302,7 +1307,7 @@ impl Executor {
         // The step itself keeps to the jerk limit unless the acceleration
         // clamp cut it short (entering a segment with a lower limit) or it
         // snaps to rest below.
-        let mut within = (a - self.a).abs() <= jmax * dt * (1.0 + 1e-9);
+        let mut within = self.keeps_jerk(a, jmax);
         if v <= 0.0 {
             // Comes to rest within the period. If a jerk within the limit
             // brings speed and acceleration to zero together at τ = −2v/a,
@@ -1352,6 +1357,12 @@ impl Executor {
             }
             None => self.follow_guard(q, head, ds, v, a, consumed),
         }
+    }
+
+    /// Whether a step this period to acceleration `a` keeps to jerk limit
+    /// `jmax`.
+    fn keeps_jerk(&self, a: f64, jmax: f64) -> bool {
+        (a - self.a).abs() <= jmax * self.period * (1.0 + 1e-9)
     }
 
     /// Whether the step `ds` further on, to speed `v1` and acceleration
@@ -1583,7 +1594,7 @@ impl Executor {
         // A profile's jerk is its target's limit, which the segments this
         // period reaches may not all allow.
         let (_, jmax) = self.period_limits(q, head, dt);
-        if (a - self.a).abs() <= jmax * dt * (1.0 + 1e-9) {
+        if self.keeps_jerk(a, jmax) {
             self.commit(q, head, s1 - s0, v, a, consumed)
         } else {
             self.follow_guard(q, head, s1 - s0, v, a, consumed)

@@ -228,6 +228,19 @@ pub(super) fn crest(
     (crest, lowest, machine)
 }
 
+/// `t` seconds of easing acceleration `a` at speed `v` with jerk `-jmax`,
+/// as a profile whose final speed is where it ends.
+fn easing_piece(v: f64, a: f64, jmax: f64, t: f64) -> Brake {
+    Brake {
+        v0: v,
+        a0: a,
+        v1: v + a * t - jmax * t * t / 2.0,
+        phases: [(-jmax, t), (0.0, 0.0), (0.0, 0.0)],
+        t: 0.0,
+        hold: false,
+    }
+}
+
 /// The time constant jerk `-jmax` from speed `v` and acceleration `a` > 0
 /// takes to travel `to` mm, not more (within the easing, where the speed
 /// rises): safeguarded Newton steps on the cubic.
@@ -317,17 +330,25 @@ impl Path<'_> {
     /// limits within its reach (which a longer stop may extend: a few
     /// rounds settle it).
     fn lowest_stop(&self, from: f64, v: f64, a: f64) -> Option<Brake> {
+        self.settled(from, |amax, jmax| stop(v, a, amax, jmax))
+    }
+
+    /// The profile `make` gives under the lowest acceleration and jerk
+    /// limits within its own reach from `from`: a longer profile may reach
+    /// lower limits, so a few rounds settle it. None where `make` gives
+    /// none.
+    fn settled(&self, from: f64, make: impl Fn(f64, f64) -> Option<Brake>) -> Option<Brake> {
         let (mut amax, mut jmax) = self.lowest_limits(from, from);
-        let mut stop = stop(v, a, amax, jmax)?;
+        let mut profile = make(amax, jmax)?;
         for _ in 0..16 {
-            let (a_low, j_low) = self.lowest_limits(from, from + stop.length());
+            let (a_low, j_low) = self.lowest_limits(from, from + profile.length());
             if a_low >= amax && j_low >= jmax {
                 break;
             }
             (amax, jmax) = (a_low.min(amax), j_low.min(jmax));
-            stop = self::stop(v, a, amax, jmax)?;
+            profile = make(amax, jmax)?;
         }
-        Some(stop)
+        Some(profile)
     }
 
     /// Easing acceleration `a` > 0 at speed `v` off to zero at once, from
@@ -345,28 +366,10 @@ impl Path<'_> {
     /// [`ease`](Self::ease) in one profile under the lowest jerk limit
     /// within its reach.
     fn ease_under_lowest(&self, v: f64, a: f64) -> Option<Easing> {
-        let profile = |jmax: f64| {
-            let t = a / jmax;
-            Brake {
-                v0: v,
-                a0: a,
-                v1: v + a * t / 2.0,
-                phases: [(-jmax, t), (0.0, 0.0), (0.0, 0.0)],
-                t: 0.0,
-                hold: false,
-            }
-        };
-        let (_, mut jmax) = self.lowest_limits(0.0, 0.0);
-        let mut ease = profile(jmax);
-        for _ in 0..16 {
-            let (_, j_low) = self.lowest_limits(0.0, ease.length());
-            if j_low >= jmax {
-                break;
-            }
-            jmax = j_low;
-            ease = profile(jmax);
-        }
-        jmax.is_finite().then(|| Easing {
+        let ease = self.settled(0.0, |_, jmax| {
+            jmax.is_finite().then(|| easing_piece(v, a, jmax, a / jmax))
+        })?;
+        Some(Easing {
             legs: [ease; EASE_LEGS],
             n: 1,
             crest: ease.v1,
@@ -377,16 +380,8 @@ impl Path<'_> {
     /// [`ease`](Self::ease) a profile per jerk limit, if there are at most
     /// [`EASE_LEGS`] of them.
     fn ease_in_steps(&self, v: f64, a: f64) -> Option<Easing> {
-        let piece = |v: f64, a: f64, jmax: f64, t: f64| Brake {
-            v0: v,
-            a0: a,
-            v1: v + a * t - jmax * t * t / 2.0,
-            phases: [(-jmax, t), (0.0, 0.0), (0.0, 0.0)],
-            t: 0.0,
-            hold: false,
-        };
         let mut easing = Easing {
-            legs: [piece(v, a, 1.0, 0.0); EASE_LEGS],
+            legs: [easing_piece(v, a, 1.0, 0.0); EASE_LEGS],
             n: 0,
             crest: v,
             length: 0.0,
@@ -419,13 +414,13 @@ impl Path<'_> {
             // Up to there under this limit: s(τ) = start − from, s rising
             // while the acceleration is still positive.
             let tau = time_to(v, a, jmax, start - from);
-            let part = piece(v, a, jmax, tau);
+            let part = easing_piece(v, a, jmax, tau);
             easing.legs[easing.n] = part;
             easing.n += 1;
             // On from the junction itself, under the lower limit after it.
             (from, v, a, jmax) = (start, part.v1, a - jmax * tau, seg.max_jerk);
         }
-        let last = piece(v, a, jmax, a / jmax);
+        let last = easing_piece(v, a, jmax, a / jmax);
         easing.legs[easing.n] = last;
         easing.n += 1;
         easing.crest = last.v1;
@@ -570,6 +565,11 @@ mod tests {
         std::iter::from_fn(|| planner.next_segment()).collect()
     }
 
+    /// The whole queue `q` as one view.
+    fn whole(q: &[Segment]) -> View<'_> {
+        View { head: q, tail: &[] }
+    }
+
     /// Follows `guard`, found `s0` mm into the first segment of `q`, period
     /// by period to rest, and checks each period by sampling, apart from
     /// the closed forms the guard was checked with: speed within the
@@ -626,10 +626,7 @@ mod tests {
     #[test]
     fn a_guard_rests_before_the_end_of_the_queue_within_limits() {
         let q = planned("G1 X20 F6000\nM2\n", PathMode::ExactStop);
-        let view = View {
-            head: &q,
-            tail: &[],
-        };
+        let view = whole(&q);
         // 100 mm/s stops in 5 mm at 1000 mm/s² plus 2 ms for the jerk.
         let guard = Guard::find(view, 0, 10.0, 100.0, 0.0).expect("room to stop");
         let travelled = follow(&q, 10.0, guard);
@@ -655,10 +652,7 @@ mod tests {
             "G1 X20 F6000\nG2 X20 Y-20 J-10\nM2\n",
             PathMode::Blend { tolerance: 0.01 },
         );
-        let view = View {
-            head: &q,
-            tail: &[],
-        };
+        let view = whole(&q);
         let (line, next) = (&q[0], &q[1]);
         let cap = line.exit_velocity.min(next.max_velocity);
         assert!(cap < 60.0 && next.max_acceleration < line.max_acceleration);
@@ -692,10 +686,7 @@ mod tests {
         let (line, next) = (&q[0], &q[1]);
         assert!(next.max_acceleration < 0.8 * line.max_acceleration);
         assert!(next.max_jerk < 0.5 * line.max_jerk);
-        let view = View {
-            head: &q,
-            tail: &[],
-        };
+        let view = whole(&q);
         let s0 = line.length - 0.25;
         let path = Path {
             q: view,
@@ -724,10 +715,7 @@ mod tests {
             ..line
         };
         let q = vec![piece; 2 * REACH];
-        let view = View {
-            head: &q,
-            tail: &[],
-        };
+        let view = whole(&q);
         assert!(Guard::find(view, 0, 0.0, 100.0, 0.0).is_none());
         let guard = Guard::find(view, 0, 0.0, 10.0, 0.0).expect("a short stop");
         follow(&q, 0.0, guard);
@@ -739,10 +727,7 @@ mod tests {
             "G64 P0.01\nG1 X20 F6000\nY20\nM2\n",
             PathMode::Blend { tolerance: 0.01 },
         );
-        let view = View {
-            head: &q,
-            tail: &[],
-        };
+        let view = whole(&q);
         let blend = q[1].max_velocity;
         // Just into the corner's blend, below its limit but still
         // speeding up hard enough to crest over it.
