@@ -274,3 +274,34 @@ fn offline_tools_take_programs_that_set_outputs() {
         "{text}"
     );
 }
+
+#[test]
+fn a_reader_that_stops_early_ends_kerf_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    // Canon output far beyond a pipe's 64 KiB buffer, so kerf is still
+    // writing when the reader has gone.
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from("G21 G90 F1000\n");
+    for k in 0..5000 {
+        text.push_str(&format!("G1 X{} Y{}\n", k % 100, (k * 7) % 100));
+    }
+    let file = program(&dir, "long.ngc", &text);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_kerf"))
+        .args(["canon", &file])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader closes its end before reading anything.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "kerf panicked: {stderr}");
+    assert_eq!(
+        out.status.signal(),
+        Some(libc::SIGPIPE),
+        "kerf should end by SIGPIPE like other tools: {:?}, {stderr}",
+        out.status
+    );
+}

@@ -288,6 +288,15 @@ enum ToolAction {
 }
 
 fn main() -> ExitCode {
+    // A reader that stops early (`kerf canon big.ngc | head`) should end
+    // kerf quietly, as it does any Unix tool, not make the next print
+    // panic. Rust starts programs with SIGPIPE ignored; restore the
+    // default. Writes to kerfd's socket still fail with an error, not the
+    // signal: std sends on Unix sockets with MSG_NOSIGNAL.
+    // SAFETY: called first thing in main, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let args = Args::parse();
     let socket = args
         .socket
