@@ -1837,30 +1837,65 @@ mod simulation {
     }
 
     /// Run to the stop marker, calling `control` before every tick.
+    /// Servo period of [`run`], s.
+    const PERIOD: f64 = 0.001;
+
+    thread_local! {
+        /// Periods run and guard takeovers in this thread's [`run`]s, for
+        /// the sweeps' summaries ([`sweep_verdict`]; each test has a
+        /// thread of its own).
+        static RUN_TALLY: std::cell::Cell<(u64, u64)> = const { std::cell::Cell::new((0, 0)) };
+    }
+
     fn run(
         q: &mut VecDeque<Segment>,
         mut control: impl FnMut(usize, &mut Executor),
     ) -> Vec<Sample> {
-        let dt = 0.001;
         let mut ex = Executor::new(Position::ZERO);
         let mut out = Vec::new();
         for n in 0..200_000 {
             control(n, &mut ex);
             let (a, b) = q.as_slices();
-            let s = ex.tick(dt, a, b);
+            let s = ex.tick(PERIOD, a, b);
             q.drain(..s.consumed);
             out.push(s);
             if s.stopped_at == Some(7) {
+                RUN_TALLY.with(|t| {
+                    let (periods, takeovers) = t.get();
+                    t.set((periods + out.len() as u64, takeovers + ex.guard_takeovers()));
+                });
                 return out;
             }
         }
         panic!("did not finish");
     }
 
+    /// A sweep's end: prints the first `lines` lines of each failure, and
+    /// how long the `programs` ran in all and how often the guard took
+    /// over (what a change to the search costs or saves in speed), then
+    /// asserts that none failed.
+    fn sweep_verdict(failures: &[String], programs: usize, lines: usize) {
+        for f in failures {
+            eprintln!("{}", f.lines().take(lines).collect::<Vec<_>>().join(" | "));
+        }
+        let (periods, takeovers) = RUN_TALLY.with(|t| t.take());
+        // The test harness names each test's thread after the test.
+        let sweep = std::thread::current().name().unwrap_or("sweep").to_owned();
+        eprintln!(
+            "{sweep}: {programs} programs, {:.3} s of motion, {takeovers} guard takeovers",
+            periods as f64 * PERIOD
+        );
+        assert!(
+            failures.is_empty(),
+            "{} of {programs} failed",
+            failures.len()
+        );
+    }
+
     /// Largest per-axis |velocity|, |acceleration|, |jerk| by finite
     /// differences of the sampled positions, as fractions of the limits.
     fn limit_use(samples: &[Sample]) -> (f64, f64, f64) {
-        let dt = 0.001;
+        let dt = PERIOD;
         let p: Vec<[f64; 3]> = std::iter::once([0.0; 3])
             .chain(
                 samples
@@ -2048,10 +2083,7 @@ mod simulation {
                     .flat_map(move |seed| random_programs(seed, 150, share))
             })
             .collect();
-        for f in &failures {
-            eprintln!("{}", f.lines().next().unwrap_or_default());
-        }
-        assert!(failures.is_empty(), "{} of 1800 failed", failures.len());
+        sweep_verdict(&failures, 1800, 1);
     }
 
     /// A circle of radius 20 mm about the origin in `n` chords at `feed`
@@ -2422,10 +2454,7 @@ mod simulation {
         let failures: Vec<String> = (2..=6)
             .flat_map(|seed| mixed_programs(seed, 60, &|_| true))
             .collect();
-        for f in &failures {
-            eprintln!("{}", f.lines().next().unwrap_or_default());
-        }
-        assert!(failures.is_empty(), "{} of 300 failed", failures.len());
+        sweep_verdict(&failures, 300, 1);
     }
 
     /// The mixed and operated programs of ten more seeds (7–16, 1200 in
@@ -2445,10 +2474,7 @@ mod simulation {
                     .chain(operated_programs(seed, 60, &|_| true))
             })
             .collect();
-        for f in &failures {
-            eprintln!("{}", f.lines().next().unwrap_or_default());
-        }
-        assert!(failures.is_empty(), "{} of 1200 failed", failures.len());
+        sweep_verdict(&failures, 1200, 1);
     }
 
     /// Feed hold on a circle of 0.05 mm chords: the shortest stop spans
@@ -2680,10 +2706,7 @@ mod simulation {
                 failures.extend(operator.annotate(found));
             }
         }
-        for f in &failures {
-            eprintln!("{}", f.lines().take(2).collect::<Vec<_>>().join(" | "));
-        }
-        assert!(failures.is_empty(), "{} of 56 failed", failures.len());
+        sweep_verdict(&failures, 56, 2);
     }
 
     /// The 300 programs of [`mixed_program_sweep`] under
@@ -2706,10 +2729,7 @@ mod simulation {
         let failures: Vec<String> = (2..=6)
             .flat_map(|seed| operated_programs(seed, 60, &|_| true))
             .collect();
-        for f in &failures {
-            eprintln!("{}", f.lines().take(2).collect::<Vec<_>>().join(" | "));
-        }
-        assert!(failures.is_empty(), "{} of 300 failed", failures.len());
+        sweep_verdict(&failures, 300, 2);
     }
 
     /// Single block switched on while cutting a circle of 0.05 mm chords:
