@@ -845,13 +845,6 @@ impl Executor {
                             return Ahead::blocked();
                         }
                     }
-                    if k > head
-                        && a < 0.0
-                        && v < a * a / (2.0 * seg.max_jerk)
-                        && !eases_before_running_out(v, a, jmax, dist, seg.max_jerk, self.period)
-                    {
-                        return Ahead::blocked();
-                    }
                     if seg.max_acceleration < amax || seg.max_jerk < jmax {
                         amax = amax.min(seg.max_acceleration);
                         jmax = jmax.min(seg.max_jerk);
