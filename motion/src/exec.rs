@@ -273,21 +273,34 @@ fn slower_ahead(q: View, k: usize, dist: f64, v: f64, a: f64, amax: f64, jmax: f
 }
 
 /// The acceleration to have at the end of this period so that easing it
-/// back to zero with jerk `jmax` afterwards lands exactly on `target`,
-/// capped at ±`amax`.
+/// back to zero afterwards, in whole periods at jerk up to `jmax`, lands
+/// exactly on `target`; capped at ±`amax`.
 ///
-/// Over a period of constant jerk the speed gains (a + a′)·dt/2, and easing
-/// a′ to zero gains a′·|a′|/(2J) more; solving for a′ gives the quadratic below.
+/// Over a period of constant jerk the speed gains (a + a′)·dt/2. Easing a′
+/// to zero takes n = ⌈|a′|/(J·dt)⌉ more periods, n − 1 of them at J and the
+/// last one from the remainder r to zero, and gains (a′² − r²)/(2J) +
+/// r·dt/2 with the sign of a′. Counting those whole periods, not the
+/// continuous ramp's a′²/(2J), matters near the target: there the continuous
+/// model asks for a′ = −2·(v − target)/dt − a, which lands on the target
+/// with the opposite acceleration, and the acceleration then flips sign
+/// every period at cruise (a limit cycle whose crests carry the speed over
+/// the target inside the period). With the whole periods counted, the speed
+/// and the acceleration settle together within two periods.
 fn tracking_acceleration(v: f64, a: f64, target: f64, dt: f64, amax: f64, jmax: f64) -> f64 {
     if !jmax.is_finite() {
         // No jerk limit: reach the target speed in this period if possible.
         return ((target - v) / dt).clamp(-amax, amax);
     }
-    let rest = v + a * dt / 2.0 - target;
-    let h = dt / 2.0;
-    // a′²/(2J)·sign + a′·h + rest = 0, with the sign of a′ opposite to rest.
-    let root = jmax * (-h + (h * h + 2.0 * rest.abs() / jmax).sqrt());
-    let a_next = if rest < 0.0 { root } else { -root };
+    // Speed still to gain after this period's (a + a′)·dt/2 share of a's.
+    let rest = target - v - a * dt / 2.0;
+    // With x = |a′| in ((n − 1)·J·dt, n·J·dt] and c = (n − 1)·J·dt, this
+    // period and the easing gain x·(dt + c/J) − c²/(2J) − c·dt/2, which
+    // is linear in x and reaches J·dt²·n(n + 1)/2 at the top of the piece.
+    let m = rest.abs() / (jmax * dt * dt);
+    let n = ((-1.0 + (1.0 + 8.0 * m).sqrt()) / 2.0).ceil().max(1.0);
+    let c = (n - 1.0) * jmax * dt;
+    let x = (rest.abs() + c * c / (2.0 * jmax) + c * dt / 2.0) / (dt + c / jmax);
+    let a_next = if rest < 0.0 { -x } else { x };
     a_next.clamp(-amax, amax)
 }
 
@@ -1679,6 +1692,79 @@ impl Executor {
 mod tests {
     use super::*;
 
+    /// The tracking law applied period after period, as the executor does
+    /// (speed gains (a + a′)·dt/2, jerk clamped to J): from rest, from
+    /// either side of the target and from an acceleration already under
+    /// way, the speed lands on the target with zero acceleration and stays
+    /// there, within J per period, and a start from rest never passes the
+    /// target, not even inside a period.
+    #[test]
+    fn tracking_settles_on_the_target_without_ringing() {
+        let (dt, amax, jmax) = (0.001, 1000.0, 50_000.0);
+        for &(v0, a0, target) in &[
+            (0.0, 0.0, 50.0),
+            (0.0, 0.0, 0.01),
+            (49.0, 0.0, 50.0),
+            (50.0, 0.0, 49.999),
+            (100.0, 0.0, 3.0),
+            (20.0, 300.0, 25.0),
+            (30.0, -800.0, 10.0),
+            (49.9999, 2.8, 50.0),
+        ] {
+            let (mut v, mut a) = (v0, a0);
+            let mut settled_at = None;
+            for k in 0..2000 {
+                let want = tracking_acceleration(v, a, target, dt, amax, jmax);
+                let a1 = a + (want - a).clamp(-jmax * dt, jmax * dt);
+                if v0 < target && a0 == 0.0 && a >= 0.0 && a1 < 0.0 {
+                    // The crest inside the period, where a passes zero.
+                    let crest = v + a * a / (2.0 * (a - a1) / dt);
+                    assert!(crest <= target + 1e-9, "{v0} -> {target}: crest {crest}");
+                }
+                v += (a + a1) * dt / 2.0;
+                a = a1;
+                if v0 < target && a0 == 0.0 {
+                    assert!(v <= target + 1e-9, "{v0} -> {target}: passed it at {v}");
+                }
+                let on = (v - target).abs() < 1e-9 && a.abs() < 1e-9;
+                match settled_at {
+                    None if on => settled_at = Some(k),
+                    Some(at) => assert!(
+                        on,
+                        "{v0} -> {target}: left it at {k} (settled {at}): v {v} a {a}"
+                    ),
+                    None => {}
+                }
+            }
+            assert!(settled_at.is_some(), "{v0} -> {target}: v {v}, a {a}");
+        }
+    }
+
+    /// From rest to a speed the jerk limit alone bounds (no acceleration
+    /// limit reached), the law takes the time-optimal number of periods:
+    /// the speed gains J·dt²·n² in n periods up and n down, so 50 mm/s at
+    /// 50,000 mm/s³ takes 2·⌈√(50 / 0.05)⌉ = 64 periods.
+    #[test]
+    fn tracking_from_rest_takes_the_jerk_limited_time() {
+        let (dt, jmax) = (0.001, 50_000.0);
+        let (mut v, mut a) = (0.0f64, 0.0f64);
+        let mut periods = 0;
+        while (v - 50.0).abs() > 1e-9 || a.abs() > 1e-9 {
+            let want = tracking_acceleration(v, a, 50.0, dt, f64::INFINITY, jmax);
+            let a1 = a + (want - a).clamp(-jmax * dt, jmax * dt);
+            v += (a + a1) * dt / 2.0;
+            a = a1;
+            periods += 1;
+            assert!(periods < 1000, "v {v} a {a}");
+        }
+        // The least n with J·dt²·⌈n/2⌉·⌊n/2⌋ ≥ 50, worked out apart.
+        let least = (1..)
+            .find(|&n: &u32| jmax * dt * dt * f64::from(n.div_ceil(2) * (n / 2)) >= 50.0)
+            .unwrap();
+        assert_eq!(least, 64);
+        assert_eq!(periods, least);
+    }
+
     #[test]
     fn braking_distance_matches_closed_forms() {
         // From rest acceleration, trapezoidal deceleration profile:
@@ -2055,6 +2141,29 @@ mod simulation {
         let share = PlannerConfig::default().jerk_rate_share;
         let failures = random_programs(0x9e37_79b9_7f4a_7c15, 40, share);
         assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// A move from rest to rest speeds up, cruises and slows down: its
+    /// acceleration changes sign once. The tracking law that counted the
+    /// continuous easing ramp instead of whole periods landed on the cruise
+    /// speed with the opposite acceleration and rang at ±0.3 mm/s² every
+    /// period of the cruise (1931 sign changes in 2072 periods here), a
+    /// jerk of ±600 mm/s³ that a real axis would hum with.
+    #[test]
+    fn a_line_cruises_without_ringing() {
+        // At the programmed feed; a rapid at the axes' speed limit.
+        for text in ["G1 X100 F3000\nM2\n", "G0 X300 Y200 Z-50\nM2\n"] {
+            let mut q = planned(text, PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |_, _| {});
+            let signs: Vec<f64> = out
+                .iter()
+                .map(|s| s.acceleration)
+                .filter(|a| a.abs() > 1e-9)
+                .map(f64::signum)
+                .collect();
+            let changes = signs.windows(2).filter(|w| w[0] != w[1]).count();
+            assert_eq!(changes, 1, "{text}");
+        }
     }
 
     /// 600 more random programs at each of the curvature-rate shares ⅓,
