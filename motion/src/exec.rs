@@ -1373,9 +1373,11 @@ impl Executor {
 
     /// Whether the step `ds` further on, to speed `v1` and acceleration
     /// `a1` with constant jerk over the period, passes every junction it
-    /// crosses under the junction's machine cap: a guard checks the way on
-    /// from where a step ends, not the junctions the step itself crosses
-    /// (a creep toward a program's stop must not cross it still moving).
+    /// crosses under the junction's machine cap, and its crest inside the
+    /// period (where the acceleration passes from positive to negative)
+    /// under the speed limit of the segment it falls in: a guard checks the
+    /// way on from where a step ends, not what the step itself passes (a
+    /// creep toward a program's stop must not cross it still moving).
     fn crosses_within_caps(&self, q: View, head: usize, ds: f64, v1: f64, a1: f64) -> bool {
         let (v0, a0, dt) = (self.v, self.a, self.period);
         let j = (a1 - a0) / dt;
@@ -1385,12 +1387,21 @@ impl Executor {
         } else {
             0.0
         });
+        // Where and how fast the speed crests inside the period, if it does.
+        let mut crest =
+            (a0 > 0.0 && a1 < 0.0).then(|| (travelled(-a0 / j), v0 - a0 * a0 / (2.0 * j)));
         let mut end = -self.s;
         for k in head..head + LOOK_PAST_REACH {
             let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
                 return true;
             };
             end += seg.length;
+            if let Some((_, speed)) = crest.filter(|&(at, _)| at <= end) {
+                if speed > seg.max_velocity * (1.0 + 1e-12) {
+                    return false;
+                }
+                crest = None;
+            }
             if end >= ds {
                 return true;
             }
@@ -2141,6 +2152,42 @@ mod simulation {
         let share = PlannerConfig::default().jerk_rate_share;
         let failures = random_programs(0x9e37_79b9_7f4a_7c15, 40, share);
         assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// A step whose acceleration passes from positive to negative crests
+    /// inside the period, above the speeds at both its ends; the crest
+    /// must be within the speed limit of the segment it falls in, or the
+    /// guard takes over (the guard's own easing checks its crest). This
+    /// is the step the old tracking law took at cruise: 1e-4 mm/s under
+    /// the limit, +2.8 to −2.8 mm/s², cresting 6e-4 mm/s over it.
+    #[test]
+    fn a_step_cresting_over_the_speed_limit_inside_the_period_is_refused() {
+        let q = planned("G1 X100 F9000\nM2\n", PathMode::Blend { tolerance: 0.01 });
+        let line = &q[0];
+        assert_eq!(line.max_velocity, LIMITS.max_velocity);
+        let view = View {
+            head: q.as_slices().0,
+            tail: q.as_slices().1,
+        };
+        let mut ex = Executor::new(Position::ZERO);
+        ex.period = PERIOD;
+        let (v0, a0, a1) = (LIMITS.max_velocity - 1e-4, 2.8, -2.8);
+        (ex.s, ex.v, ex.a) = (50.0, v0, a0);
+        let v1 = v0 + (a0 + a1) * PERIOD / 2.0;
+        let ds = v0 * PERIOD + a0 * PERIOD * PERIOD / 2.0 + (a1 - a0) * PERIOD * PERIOD / 6.0;
+        // The crest, sampled apart from the closed form the check uses.
+        let crest = (0..=1000)
+            .map(|i| {
+                let t = PERIOD * f64::from(i) / 1000.0;
+                v0 + a0 * t + (a1 - a0) / PERIOD * t * t / 2.0
+            })
+            .fold(0.0f64, f64::max);
+        assert!(crest > LIMITS.max_velocity + 5e-4 && v1 < LIMITS.max_velocity);
+        assert!(!ex.crosses_within_caps(view, 0, ds, v1, a1));
+        // The same step 1e-3 mm/s lower crests under the limit.
+        ex.v = v0 - 1e-3;
+        let v1 = ex.v + (a0 + a1) * PERIOD / 2.0;
+        assert!(ex.crosses_within_caps(view, 0, ds - 1e-6, v1, a1));
     }
 
     /// A move from rest to rest speeds up, cruises and slows down: its
