@@ -1083,9 +1083,10 @@ impl Executor {
         }
 
         let target = self.cap(seg);
-        // The last period of an acceleration ramp uses less than full jerk
-        // and gains up to J·dt²/8 more speed than the continuous ramp; aim
-        // that much low so a speed limit is never exceeded.
+        // Aim J·dt²/8 low. The continuous tracking law overshot by up to
+        // that much in a ramp's last period; the whole-period law does not,
+        // but the caps-near aim below was sized with this slack, and the
+        // speed it would win back is about 1e-4 of the cruise.
         let margin = if shaped { jmax * dt * dt / 8.0 } else { 0.0 };
         // A junction cap just ahead and only that much lower (the speed
         // limit of the next chord, a few µm/s under this one's) is too
