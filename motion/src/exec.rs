@@ -1383,14 +1383,10 @@ impl Executor {
         let (v0, a0, dt) = (self.v, self.a, self.period);
         let j = (a1 - a0) / dt;
         let travelled = |t: f64| v0 * t + a0 * t * t / 2.0 + j * t * t * t / 6.0;
-        let fastest = v0.max(v1).max(if a0 > 0.0 && a1 < 0.0 {
-            v0 - a0 * a0 / (2.0 * j)
-        } else {
-            0.0
-        });
         // Where and how fast the speed crests inside the period, if it does.
         let mut crest =
             (a0 > 0.0 && a1 < 0.0).then(|| (travelled(-a0 / j), v0 - a0 * a0 / (2.0 * j)));
+        let fastest = v0.max(v1).max(crest.map_or(0.0, |(_, speed)| speed));
         let mut end = -self.s;
         for k in head..head + LOOK_PAST_REACH {
             let Some(seg) = q.get(k).filter(|s| s.is_motion()) else {
