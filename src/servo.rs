@@ -251,7 +251,15 @@ pub struct ServoTick {
     force: Option<ForceControl>,
     /// Force control as the running program last set it.
     program_force: Option<f64>,
+    /// The executor moved at the feed the override asks for this tick
+    /// (see [`FEEDING_SHARE`]), for the force controller.
+    feeding: bool,
 }
+
+/// Share of the commanded feed (programmed × overrides, capped by the
+/// segment's speed limit) below which the force controller takes the
+/// machine to be changing speed, not cutting at the feed it set.
+const FEEDING_SHARE: f64 = 0.5;
 
 impl ServoTick {
     /// A tick of `period` seconds for a machine resting at `start`, with
@@ -300,6 +308,7 @@ impl ServoTick {
             spindle_rpm: 0.0,
             force: None,
             program_force: None,
+            feeding: false,
         })
     }
 
@@ -516,6 +525,8 @@ impl ServoTick {
         self.snapshot.ticks += 1;
         let n = self.snapshot.joint_count;
         let active = self.enabled && self.snapshot.fault.is_none();
+        // Set again where the executor runs.
+        self.feeding = false;
         if !active {
             self.discard_queue();
             let snap = &mut self.snapshot;
@@ -557,7 +568,7 @@ impl ServoTick {
             }
         }
         if let Some(fc) = &mut self.force {
-            fc.tick(self.feedback.spindle_current);
+            fc.tick(self.feedback.spindle_current, self.feeding);
             self.executor.set_feed_scale(fc.feed_override());
         }
         self.publish_force();
@@ -670,6 +681,15 @@ impl ServoTick {
             Some(seg) => Some(seg),
             None => tail.get(sample.consumed - head.len()),
         };
+        self.feeding = current.is_some_and(|seg| {
+            let ex = &self.executor;
+            let commanded = seg
+                .max_velocity
+                .min(seg.feed * ex.feed_override() * ex.feed_scale());
+            seg.kind == SegmentKind::Feed
+                && !ex.is_held()
+                && sample.velocity >= FEEDING_SHARE * commanded
+        });
         if let (Some(seg), Some(fc)) = (current.filter(|s| s.is_motion()), &mut self.force) {
             if seg.force_control != self.program_force {
                 self.program_force = seg.force_control;

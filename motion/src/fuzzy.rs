@@ -224,6 +224,9 @@ pub struct ForceControl {
     ticks: u32,
     /// Largest force estimate seen in the current step, N.
     peak: f64,
+    /// The machine fed at the commanded rate through every tick of the
+    /// current step so far.
+    feeding: bool,
     last_step: Step,
 }
 
@@ -239,6 +242,7 @@ impl ForceControl {
             last_e: None,
             ticks: 0,
             peak: f64::NEG_INFINITY,
+            feeding: true,
             last_step: Step {
                 feed_override: 1.0,
                 ..Step::default()
@@ -279,17 +283,26 @@ impl ForceControl {
         self.ticks_per_step
     }
 
-    /// One servo period with spindle current `amps`. Returns the step if
-    /// one completed this tick.
-    pub fn tick(&mut self, amps: f64) -> Option<Step> {
+    /// One servo period with spindle current `amps`; `feeding` says the
+    /// machine moves at the feed the override asks for (not braking for a
+    /// stop, a hold or a corner, not on a rapid). Returns the step if one
+    /// completed this tick.
+    ///
+    /// A step that was not feeding throughout holds the override: its
+    /// force fell or rose because the machine changed speed, not because
+    /// the material did, and acting on it winds the override up (a stop in
+    /// the material raised it one step, up to gain_out, for the restart).
+    pub fn tick(&mut self, amps: f64, feeding: bool) -> Option<Step> {
         self.peak = self.peak.max(self.sensor.force(amps));
+        self.feeding &= feeding;
         self.ticks += 1;
         if self.ticks < self.ticks_per_step {
             return None;
         }
-        let force = self.peak;
+        let (force, fed) = (self.peak, self.feeding);
         self.ticks = 0;
         self.peak = f64::NEG_INFINITY;
+        self.feeding = true;
         let mut step = Step {
             force,
             feed_override: self.feed_override,
@@ -298,8 +311,9 @@ impl ForceControl {
         if let Some(target) = self.target {
             let e = (target - force) / target;
             step.e = e;
-            if force < self.config.engage * target {
-                // Cutting air: hold, and start afresh at the material.
+            if force < self.config.engage * target || !fed {
+                // Cutting air, or the machine changed speed: hold, and
+                // start afresh at the next step cut at the commanded feed.
                 self.last_e = None;
             } else {
                 let ce = self.last_e.map_or(0.0, |last| e - last);
@@ -386,7 +400,7 @@ mod tests {
         fc.set_target(Some(100.0));
         // Forces 50, 80, 60, 70 N: the step sees 80 N, E = 0.2.
         let amps = [2.5, 2.8, 2.6, 2.7];
-        let steps: Vec<_> = amps.iter().map(|&a| fc.tick(a)).collect();
+        let steps: Vec<_> = amps.iter().map(|&a| fc.tick(a, true)).collect();
         assert!(steps[..3].iter().all(Option::is_none));
         let step = steps[3].unwrap();
         assert!((step.force - 80.0).abs() < 1e-9);
@@ -403,20 +417,56 @@ mod tests {
         let mut fc = ForceControl::new(config, sensor(), 1);
         fc.set_target(Some(200.0));
         // Idle current: no force, below the engage threshold: hold.
-        assert_eq!(fc.tick(2.0).unwrap().feed_override, 1.0);
+        assert_eq!(fc.tick(2.0, true).unwrap().feed_override, 1.0);
         // Far too much force, many steps: down to the lower bound, no further.
         for _ in 0..100 {
-            fc.tick(2.0 + 0.01 * 1000.0);
+            fc.tick(2.0 + 0.01 * 1000.0, true);
         }
         assert_eq!(fc.feed_override(), config.min_override);
         // Too little (but cutting): up to the upper bound.
         for _ in 0..100 {
-            fc.tick(2.0 + 0.01 * 100.0);
+            fc.tick(2.0 + 0.01 * 100.0, true);
         }
         assert_eq!(fc.feed_override(), config.max_override);
         fc.set_target(None);
         assert_eq!(fc.feed_override(), 1.0);
-        assert_eq!(fc.tick(5.0).unwrap().output, 0.0);
+        assert_eq!(fc.tick(5.0, true).unwrap().output, 0.0);
+    }
+
+    /// A revolution that ends with the machine braking to a stop in the
+    /// material sees the force fall with the feed, not with the material:
+    /// the same forces that raise the override while feeding (the tail of
+    /// the sensor's lag, 229 N against 250) leave it where it was, and the
+    /// next step cut at the feed acts afresh (CE = 0).
+    #[test]
+    fn a_step_the_machine_changed_speed_in_holds_the_override() {
+        let (target, per_step) = (250.0, 4);
+        let amps = |force: f64| 2.0 + 0.01 * force;
+        for feeding_through in [true, false] {
+            let mut fc = ForceControl::new(FuzzyConfig::default(), sensor(), per_step);
+            fc.set_target(Some(target));
+            let steady = (0..per_step).map(|_| fc.tick(amps(target), true)).last();
+            let before = steady.unwrap().unwrap().feed_override;
+            // Feeding for three ticks, braking in the last one.
+            let step = [229.0, 200.0, 150.0, 60.0]
+                .iter()
+                .enumerate()
+                .map(|(k, &f)| fc.tick(amps(f), feeding_through || k < 3))
+                .last()
+                .unwrap()
+                .unwrap();
+            if feeding_through {
+                let want = before + 0.15 * infer(1.0 - 229.0 / 250.0, 1.0 - 229.0 / 250.0);
+                assert!((step.feed_override - want).abs() < 1e-12, "{step:?}");
+                assert!(step.feed_override > before + 0.01);
+            } else {
+                assert_eq!((step.feed_override, step.output), (before, 0.0));
+                // Back at the feed: E alone, CE from nothing.
+                let next = (0..per_step).map(|_| fc.tick(amps(229.0), true)).last();
+                let want = before + 0.15 * infer(1.0 - 229.0 / 250.0, 0.0);
+                assert!((next.unwrap().unwrap().feed_override - want).abs() < 1e-12);
+            }
+        }
     }
 
     #[test]
@@ -433,7 +483,7 @@ mod tests {
         for k in 0..60 {
             let gain = if k < 20 { 250.0 } else { 490.0 };
             force = gain * history[1];
-            let step = fc.tick(2.0 + 0.01 * force).unwrap();
+            let step = fc.tick(2.0 + 0.01 * force, true).unwrap();
             history = [step.feed_override, history[0]];
             if k >= 40 {
                 assert!((force - target).abs() < 0.02 * target, "k {k}: {force}");
