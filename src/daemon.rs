@@ -490,6 +490,7 @@ impl Shared {
             machine: self.machine.clone(),
             state,
             execution,
+            optional_stop: snap.optional_stop,
             homed: control.homed().to_vec(),
             line: snap.line,
             position: self.axes_map(&snap.position),
@@ -891,20 +892,28 @@ async fn handle(
         }
         Command::Run { path, line } => run(shared, path, line, false).await,
         Command::Pause => operator(shared, Control::pause, &[ServoCommand::Hold(true)]),
-        Command::Resume => operator(
-            shared,
-            Control::resume,
-            &[ServoCommand::SingleBlock(false), ServoCommand::Hold(false)],
-        ),
+        Command::Resume => {
+            let mut control = shared.observe();
+            let stop = control.resume()?;
+            shared.send(ServoCommand::SingleBlock(false))?;
+            shared.send(ServoCommand::Hold(false))?;
+            if let Some(reached) = stop {
+                shared.send(ServoCommand::ReleaseStop { reached })?;
+            }
+            Ok(json!({}))
+        }
         Command::Step => {
             let stepping_program = {
                 let mut control = shared.observe();
                 if control.state().0 == MachineState::Idle {
                     false
                 } else {
-                    control.step()?;
+                    let stop = control.step()?;
                     shared.send(ServoCommand::SingleBlock(true))?;
                     shared.send(ServoCommand::Hold(false))?;
+                    if let Some(reached) = stop {
+                        shared.send(ServoCommand::ReleaseStop { reached })?;
+                    }
                     shared.send(ServoCommand::Step)?;
                     true
                 }
@@ -914,6 +923,10 @@ async fn handle(
             } else {
                 run(shared, None, None, true).await
             }
+        }
+        Command::OptionalStop { enabled } => {
+            shared.send(ServoCommand::OptionalStop(enabled))?;
+            Ok(json!({ "enabled": enabled }))
         }
         Command::Abort => {
             let mut control = shared.observe();

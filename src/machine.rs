@@ -116,6 +116,12 @@ pub struct Control {
     held: bool,
     /// Single-block mode requested.
     single_block: bool,
+    /// The program stop (M0, M1, M60) the tool waits at, by the servo's
+    /// count ([`Snapshot::program_stops`]), and its source line.
+    stopped_at: Option<(u64, u32)>,
+    /// The last program stop the operator resumed from: the servo may
+    /// still report waiting at it for a period.
+    resumed_stop: u64,
     next_tag: u32,
     messages: VecDeque<PendingMessage>,
     /// State last reported in an event.
@@ -140,6 +146,8 @@ impl Control {
             last_job: None,
             held: false,
             single_block: false,
+            stopped_at: None,
+            resumed_stop: 0,
             next_tag: 1,
             messages: VecDeque::new(),
             reported: (MachineState::Estop, None),
@@ -167,7 +175,7 @@ impl Control {
             },
         };
         let execution = matches!(state, MachineState::Auto | MachineState::Mdi).then(|| {
-            if self.held {
+            if self.held || self.stopped_at.is_some() {
                 Execution::Paused
             } else if self.single_block {
                 Execution::Stepping
@@ -415,28 +423,41 @@ impl Control {
         Ok(())
     }
 
-    /// `resume`: release feed hold and single block.
-    pub fn resume(&mut self) -> Result<(), Refusal> {
+    /// `resume`: release feed hold, single block and the program stop the
+    /// tool waits at. Returns that stop's number, for the servo's
+    /// [`ServoCommand::ReleaseStop`](crate::servo::ServoCommand::ReleaseStop).
+    pub fn resume(&mut self) -> Result<Option<u64>, Refusal> {
         self.check_executing("resume")?;
-        if !self.held && !self.single_block {
+        if !self.held && !self.single_block && self.stopped_at.is_none() {
             return Err(refuse("not paused or stepping: nothing to resume".into()));
         }
         self.held = false;
         self.single_block = false;
+        let stop = self.leave_stop();
         self.transition("resumed by operator".into());
-        Ok(())
+        Ok(stop)
     }
 
-    /// `step` during a program: single-block mode, run one more line.
-    pub fn step(&mut self) -> Result<(), Refusal> {
+    /// `step` during a program: single-block mode, run one more line (out
+    /// of a program stop too). Returns the program stop left, as
+    /// [`Control::resume`] does.
+    pub fn step(&mut self) -> Result<Option<u64>, Refusal> {
         self.check_executing("step")?;
         if !matches!(self.job.as_ref().map(|j| &j.kind), Some(JobKind::Program)) {
             return Err(refuse("only a program can be stepped".into()));
         }
         self.held = false;
         self.single_block = true;
+        let stop = self.leave_stop();
         self.transition("single-block step".into());
-        Ok(())
+        Ok(stop)
+    }
+
+    /// Forget the program stop the tool waits at, and return its number.
+    fn leave_stop(&mut self) -> Option<u64> {
+        let (stop, _) = self.stopped_at.take()?;
+        self.resumed_stop = stop;
+        Some(stop)
     }
 
     fn check_executing(&self, what: &str) -> Result<(), Refusal> {
@@ -531,6 +552,18 @@ impl Control {
                 line: m.line,
             });
         }
+        let stop = (snap.at_program_stop && snap.program_stops > self.resumed_stop)
+            .then_some((snap.program_stops, snap.line))
+            .filter(|_| ended.is_none() && self.job.is_some());
+        if stop != self.stopped_at {
+            self.stopped_at = stop;
+            if let Some((_, line)) = stop {
+                tracing::info!(line, "program stop");
+                self.transition(format!(
+                    "program stop (M0 or M1) at line {line}: `resume` to go on"
+                ));
+            }
+        }
         if let (Some(job), Some(p)) = (&self.job, self.program.as_mut()) {
             if job.kind == JobKind::Program && p.status.id == job.tag && snap.line != p.status.line
             {
@@ -553,6 +586,7 @@ impl Control {
     fn end_job(&mut self, job: Job, reached_end: bool) {
         self.held = false;
         self.single_block = false;
+        self.stopped_at = None;
         let (state, error) = if let Some(f) = &self.fault {
             (ProgramState::Failed, Some(format!("stopped by fault: {f}")))
         } else if let Some(e) = job.error {

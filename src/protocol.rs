@@ -106,11 +106,15 @@ pub enum Command {
     },
     /// Feed hold: decelerate on the path and wait.
     Pause,
-    /// Release feed hold and single-block stepping.
+    /// Release feed hold, single-block stepping and a program stop (M0,
+    /// M1, M60) the tool waits at.
     Resume,
-    /// Single-block: run the next source line, then wait. From `idle`, starts
-    /// the opened program that way.
+    /// Single-block: run the next source line, then wait (out of a program
+    /// stop too). From `idle`, starts the opened program that way.
     Step,
+    /// The optional-stop switch: whether M1 stops the program (on when the
+    /// daemon starts).
+    OptionalStop { enabled: bool },
     /// Stop the program, MDI, jog or homing, decelerating on the path.
     Abort,
     /// Set the feed (0–200), rapid (0–100) and/or spindle speed (0–200)
@@ -158,7 +162,7 @@ pub enum Command {
 }
 
 /// Every command name, as sent in `cmd`.
-pub const COMMANDS: [&str; 26] = [
+pub const COMMANDS: [&str; 27] = [
     "hello",
     "auth",
     "status",
@@ -177,6 +181,7 @@ pub const COMMANDS: [&str; 26] = [
     "pause",
     "resume",
     "step",
+    "optional_stop",
     "abort",
     "override",
     "offsets",
@@ -290,7 +295,7 @@ pub enum MachineState {
 #[serde(rename_all = "snake_case")]
 pub enum Execution {
     Running,
-    /// Feed hold.
+    /// Feed hold, or waiting at a program stop (M0, M1, M60).
     Paused,
     /// Single-block mode.
     Stepping,
@@ -422,8 +427,11 @@ pub struct Status {
     pub machine: String,
     /// The machine state (see `docs/protocol.md`).
     pub state: MachineState,
-    /// In `auto` and `mdi`: running, paused or stepping.
+    /// In `auto` and `mdi`: running, paused (feed hold, or waiting at a
+    /// program stop) or stepping.
     pub execution: Option<Execution>,
+    /// The optional-stop switch: M1 stops the program.
+    pub optional_stop: bool,
     /// Per joint, in joint order: homed.
     pub homed: Vec<bool>,
     /// Source line being executed (0 before any).

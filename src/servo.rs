@@ -45,6 +45,14 @@ pub enum ServoCommand {
     SingleBlock(bool),
     /// In single-block mode, run the next source line.
     Step,
+    /// The operator resumed at program stop number `reached` (as counted
+    /// in [`Snapshot::program_stops`]): go on if the tool still waits
+    /// there. A release for another stop, or sent while the tool moves,
+    /// does nothing, so it can never carry the tool past a stop it has
+    /// not reached yet.
+    ReleaseStop { reached: u64 },
+    /// The optional-stop switch: whether M1 waits for the operator.
+    OptionalStop(bool),
     /// Stop on the path, then discard the queue up to the `Stop` marker
     /// tagged `program`, which the planner sends when it has stopped.
     /// Ignored if that marker has already been reached or discarded.
@@ -149,6 +157,14 @@ pub struct Snapshot {
     pub spindle_override: f64,
     /// Feed hold is on.
     pub hold: bool,
+    /// Program stops (M0, M60, M1 with the switch on) the tool has come to
+    /// wait at since start.
+    pub program_stops: u64,
+    /// The tool waits at program stop number `program_stops` for
+    /// [`ServoCommand::ReleaseStop`].
+    pub at_program_stop: bool,
+    /// The optional-stop switch is on: M1 waits for the operator.
+    pub optional_stop: bool,
     /// Commanded tool position.
     pub commanded: Position,
     /// Tool position from joint feedback through forward kinematics.
@@ -194,6 +210,9 @@ impl Snapshot {
             rapid_override: 1.0,
             spindle_override: 1.0,
             hold: false,
+            program_stops: 0,
+            at_program_stop: false,
+            optional_stop: true,
             commanded: position,
             position,
             joints: j,
@@ -462,6 +481,16 @@ impl ServoTick {
                 self.snapshot.single_block = on;
             }
             ServoCommand::Step => self.executor.step(),
+            ServoCommand::ReleaseStop { reached } => {
+                let snap = &self.snapshot;
+                if snap.at_program_stop && snap.program_stops == reached {
+                    self.executor.release_stop();
+                }
+            }
+            ServoCommand::OptionalStop(on) => {
+                self.executor.set_optional_stop(on);
+                self.snapshot.optional_stop = on;
+            }
             ServoCommand::Abort { program } => {
                 let snap = &self.snapshot;
                 if program > snap.program_done.max(snap.program_aborted) {
@@ -482,6 +511,7 @@ impl ServoTick {
                     self.executor = Executor::new(snap.position);
                     self.executor.set_feed_override(feed);
                     self.executor.set_rapid_override(rapid);
+                    self.executor.set_optional_stop(snap.optional_stop);
                     snap.single_block = false;
                     snap.commanded = snap.position;
                     for (cmd, &q) in self.setpoints.joints.iter_mut().zip(&snap.joints) {
@@ -505,6 +535,7 @@ impl ServoTick {
     /// faulted); `Stop` markers taken this way count as aborted.
     fn discard_queue(&mut self) {
         let snap = &mut self.snapshot;
+        snap.at_program_stop = false;
         while let Ok(seg) = self.queue.pop() {
             snap.consumed += 1;
             self.head_outputs_done = false;
@@ -640,6 +671,7 @@ impl ServoTick {
         if self.aborting.is_some() && self.executor.velocity() == 0.0 {
             // Still waiting for the planner's marker: stay put.
             snap.moving = false;
+            snap.at_program_stop = false;
             return;
         }
         let chunk = self
@@ -675,6 +707,10 @@ impl ServoTick {
             _ => self.input_wait = None,
         }
         let sample = self.executor.tick(self.period, head, tail);
+        if sample.program_stop && !snap.at_program_stop {
+            snap.program_stops += 1;
+        }
+        snap.at_program_stop = sample.program_stop;
         // The program's force control changes when a segment that asks for
         // something else starts.
         let current = match head.get(sample.consumed) {

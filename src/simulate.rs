@@ -323,6 +323,15 @@ pub fn simulate(
         if let Some(p) = &mut process {
             p.tick(time, &snap, tick.feedback().cutting_force);
         }
+        if snap.at_program_stop {
+            // Nobody is there to resume an M0 or M1: go on at once, and
+            // leave the operator's part out of the cycle time.
+            commands
+                .push(servo::ServoCommand::ReleaseStop {
+                    reached: snap.program_stops,
+                })
+                .map_err(|_| anyhow!("the servo's command queue is full"))?;
+        }
         if snap.program_done == 1 {
             report.cycle_time = time;
             break;

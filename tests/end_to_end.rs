@@ -415,6 +415,117 @@ fn pause_and_resume_mid_move_keep_the_position_continuous() {
     assert!(axis(resumed, "x") > x_paused);
 }
 
+/// Events until a status satisfies `pred`: the statuses seen, and the
+/// reasons given by the state events among them.
+fn events_until(c: &mut Client, pred: impl Fn(&Status) -> bool) -> (Vec<Status>, Vec<String>) {
+    let (mut statuses, mut reasons) = (Vec::new(), Vec::new());
+    loop {
+        match c.next_event().unwrap() {
+            Event::Status { status } => {
+                let done = pred(&status);
+                statuses.push(status);
+                if done {
+                    return (statuses, reasons);
+                }
+                assert!(statuses.len() < MAX_STATUSES, "{:?}", statuses.last());
+            }
+            Event::State {
+                reason: Some(r), ..
+            } => reasons.push(r),
+            _ => {}
+        }
+    }
+}
+
+/// M0 and M1 stop the program at rest where they are and wait, whatever
+/// the time, until `resume`; M1 only while the optional-stop switch is on.
+/// The state event says where it stopped and what to do; `abort` from a
+/// stop ends the program there.
+#[test]
+fn program_stops_wait_for_the_operator() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let program = kerfd.program(
+        "stops.ngc",
+        "G64 P0.01\nG1 X20 F3000\nM0\nG1 X40\nM1\nG1 X60\nM1\nG1 X80\nM2\n",
+    );
+    subscribe(&mut c, 200.0);
+    assert!(status(&mut c).optional_stop, "on when the daemon starts");
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    let stopped =
+        |x: f64| move |s: &Status| s.execution == Some(Execution::Paused) && axis(s, "x") == x;
+    let (seen, mut reasons) = events_until(&mut c, stopped(20.0));
+    let at = seen.last().unwrap().clone();
+    assert_eq!(
+        (at.state, at.line, at.velocity),
+        (MachineState::Auto, 3, 0.0)
+    );
+    // It waits: 40 statuses (0.2 s) later nothing has moved.
+    let waited = std::cell::Cell::new(0);
+    let (seen, more) = events_until(&mut c, |_| {
+        waited.set(waited.get() + 1);
+        waited.get() == 40
+    });
+    reasons.extend(more);
+    for s in &seen {
+        assert_eq!(s.commanded, at.commanded);
+        assert_eq!(s.execution, Some(Execution::Paused));
+    }
+    // The state event (which may come either side of the status that
+    // first shows the stop) says where and what to do.
+    assert!(
+        reasons
+            .iter()
+            .any(|r| r.contains("program stop") && r.contains("line 3") && r.contains("resume")),
+        "{reasons:?}"
+    );
+    c.request(&Command::Resume).unwrap();
+    // The M1 at line 5 stops too: the switch is on.
+    let (seen, _) = events_until(&mut c, stopped(40.0));
+    assert_eq!(seen.last().unwrap().line, 5);
+    assert!(
+        seen.iter()
+            .all(|s| axis(s, "x") >= 20.0 && axis(s, "x") <= 40.0),
+        "went on from the stop to the next"
+    );
+    let ok = c
+        .request(&Command::OptionalStop { enabled: false })
+        .unwrap();
+    assert_eq!(ok["enabled"], false);
+    statuses_until(&mut c, |s| !s.optional_stop);
+    c.request(&Command::Resume).unwrap();
+    // With the switch off the M1 at line 7 (at X60) passes.
+    let (seen, _) = events_until(&mut c, |s| job_ended(s, id));
+    let end = seen.last().unwrap();
+    assert_eq!(end.program.as_ref().unwrap().state, ProgramState::Finished);
+    assert_eq!(axis(end, "x"), 80.0);
+    assert!(
+        seen.iter()
+            .all(|s| s.line != 7 || s.execution != Some(Execution::Paused)),
+        "the M1 at line 7 stopped with the switch off"
+    );
+
+    // Abort from a stop: the program ends there, aborted, and the machine
+    // takes new work.
+    let program = kerfd.program("abort.ngc", "G1 X10 F3000\nM0\nG1 X0\nM2\n");
+    let id = c.request(&run_cmd(&program)).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    events_until(&mut c, stopped(10.0));
+    c.request(&Command::Abort).unwrap();
+    let end = statuses_until(&mut c, |s| job_ended(s, id)).pop().unwrap();
+    assert_eq!(end.state, MachineState::Idle);
+    assert_eq!(end.execution, None);
+    assert_eq!(end.program.as_ref().unwrap().state, ProgramState::Aborted);
+    assert_eq!(axis(&end, "x"), 10.0);
+    assert_eq!(
+        code_of(c.request(&Command::Resume).unwrap_err()).0,
+        ErrorCode::InvalidState
+    );
+}
+
 #[test]
 fn abort_stops_on_the_path_and_the_machine_takes_new_work() {
     let kerfd = Kerfd::start(&[]);
@@ -837,6 +948,7 @@ fn every_command_and_event_matches_the_schema() {
     c.request(&Command::Pause).unwrap();
     c.request(&Command::Step).unwrap();
     c.request(&Command::Resume).unwrap();
+    c.request(&Command::OptionalStop { enabled: true }).unwrap();
     c.request(&Command::Abort).unwrap();
     c.wait_job(id, 100.0, |_| {}).unwrap();
     let id = c.request(&Command::Step).unwrap()["program"]

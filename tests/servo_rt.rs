@@ -55,7 +55,7 @@ fn ticks_through_a_program_without_allocating() {
     // With outputs on the way: synchronised ones riding on moves (M62,
     // M67) and immediate ones as queue markers (M64, M65, M68), and an
     // input read at rest (M66).
-    let program = "G21 G90 G0 X50 Y40 Z-10\nM62 P0\nM67 E0 Q1.5\nG1 X80 F900\nY60\nM64 P1\nX70 Y70\nG4 P0.05\nM68 E1 Q2\nM66 P0 L0\nM66 P1 L3 Q0.01\nG20 G91 G1 Y1 Z-0.1\nM63 P0\nM65 P1\nG0 X-1\nM2\n";
+    let program = "G21 G90 G0 X50 Y40 Z-10\nM62 P0\nM67 E0 Q1.5\nG1 X80 F900\nY60\nM0\nM64 P1\nX70 Y70\nM1\nG4 P0.05\nM68 E1 Q2\nM66 P0 L0\nM66 P1 L3 Q0.01\nG20 G91 G1 Y1 Z-0.1\nM63 P0\nM65 P1\nG0 X-1\nM2\n";
     let mut planner = Planner::new(&*kins, Position::ZERO, PlannerConfig::default());
     for canon in Interpreter::from_text(program, "rt.ngc", Position::ZERO) {
         planner.plan(&canon.unwrap()).unwrap();
@@ -77,6 +77,8 @@ fn ticks_through_a_program_without_allocating() {
     tick.set_following_error_limits(&[Some(0.1), Some(0.1), None]);
     tick.set_pins(kerf_io::PinBank::new(&hal_config.pins));
     commands.push(ServoCommand::Enable(true)).unwrap();
+    // Program stops seen waiting, by number (room made before counting).
+    let mut waited: Vec<u64> = Vec::with_capacity(1000);
     COUNTING.with(|c| c.set(true));
     let mut ticks = 0u64;
     while tick.snapshot().program_done != 1 && ticks < 1_000_000 {
@@ -91,10 +93,25 @@ fn ticks_through_a_program_without_allocating() {
         if let Some(cmd) = cmd {
             commands.push(cmd).unwrap();
         }
+        let snap = tick.snapshot();
+        if snap.at_program_stop && waited.len() < waited.capacity() {
+            waited.push(snap.program_stops);
+        }
+        if snap.at_program_stop && ticks.is_multiple_of(50) {
+            // The operator resumes the program stop (M0, M1) a while later.
+            let reached = snap.program_stops;
+            commands.push(ServoCommand::OptionalStop(true)).unwrap();
+            commands
+                .push(ServoCommand::ReleaseStop { reached })
+                .unwrap();
+        }
         tick.tick();
         ticks += 1;
     }
     COUNTING.with(|c| c.set(false));
+    // Both stops held the tool (for some ticks each) and were released.
+    waited.dedup();
+    assert_eq!(waited, [1, 2], "program stops waited at");
 
     assert_eq!(
         ALLOCATIONS.load(Ordering::Relaxed),

@@ -42,6 +42,9 @@ pub struct Sample {
     pub consumed: usize,
     /// Tag of a [`SegmentKind::Stop`] reached this tick.
     pub stopped_at: Option<u32>,
+    /// True while the tool waits at a program stop (M0, M60, or M1 with
+    /// the optional-stop switch on) for [`Executor::release_stop`].
+    pub program_stop: bool,
 }
 
 /// Follows a queue of segments in time.
@@ -67,6 +70,12 @@ pub struct Executor {
     brake: Option<Brake>,
     /// The M66 wait at the head of the queue may be passed.
     input_released: bool,
+    /// M1 stops (the optional-stop switch).
+    optional_stop: bool,
+    /// The tool waits at a program stop (as of the last tick).
+    at_stop: bool,
+    /// The program stop at the head of the queue may be passed.
+    stop_released: bool,
     /// Servo period of the last tick, s.
     period: f64,
     /// The caps the look ahead meets.
@@ -562,6 +571,9 @@ impl Executor {
             step_requested: false,
             brake: None,
             input_released: false,
+            optional_stop: true,
+            at_stop: false,
+            stop_released: false,
             period: 0.001,
             caps: Caps::All,
             guard: None,
@@ -573,6 +585,26 @@ impl Executor {
     /// its input has answered or timed out.
     pub fn release_input(&mut self) {
         self.input_released = true;
+    }
+
+    /// Turn the optional-stop switch on or off: whether M1 waits for the
+    /// operator. On when the executor is made, as LinuxCNC starts. The
+    /// switch counts when the tool reaches the M1, so turning it off
+    /// while the program runs skips the M1s still ahead.
+    pub fn set_optional_stop(&mut self, on: bool) {
+        self.optional_stop = on;
+    }
+
+    /// Whether M1 waits for the operator.
+    pub fn optional_stop(&self) -> bool {
+        self.optional_stop
+    }
+
+    /// Let the program stop the tool waits at go on at the next tick (the
+    /// operator resumed). Does nothing unless the tool waits at one, so a
+    /// release sent late cannot pass a stop further on.
+    pub fn release_stop(&mut self) {
+        self.stop_released = self.at_stop;
     }
 
     /// The commanded position after the last tick.
@@ -660,6 +692,8 @@ impl Executor {
         self.block_line = None;
         self.brake = None;
         self.guard = None;
+        self.at_stop = false;
+        self.stop_released = false;
     }
 
     /// Periods so far in which the motion followed its guard (a checked
@@ -691,7 +725,8 @@ impl Executor {
             SegmentKind::Dwell { .. }
             | SegmentKind::Stop { .. }
             | SegmentKind::Output(_)
-            | SegmentKind::WaitInput(_) => 0.0,
+            | SegmentKind::WaitInput(_)
+            | SegmentKind::ProgramStop { .. } => 0.0,
         }
     }
 
@@ -949,6 +984,7 @@ impl Executor {
         let mut consumed = 0;
         let mut stopped_at = None;
         let mut moving = false;
+        let mut program_stop = false;
 
         // Markers and empty segments at the head: they act only at rest.
         while let Some(seg) = q.get(consumed) {
@@ -984,6 +1020,19 @@ impl Executor {
                     self.input_released = false;
                     consumed += 1;
                 }
+                SegmentKind::ProgramStop { optional } => {
+                    self.line = seg.line;
+                    // The switch counts as the tool arrives: turning it
+                    // off at an M1 does not start the machine.
+                    let skip = optional && !self.optional_stop && !self.at_stop;
+                    if self.stop_released || skip {
+                        self.stop_released = false;
+                        consumed += 1;
+                        continue;
+                    }
+                    program_stop = true;
+                    break;
+                }
                 SegmentKind::Dwell { seconds } => {
                     if self.hold || (self.single_block && self.block_line != Some(seg.line)) {
                         break;
@@ -1011,6 +1060,7 @@ impl Executor {
             self.line = seg.line;
             self.position = seg.position_at(self.s);
         }
+        self.at_stop = program_stop;
         Sample {
             position: self.position,
             line: self.line,
@@ -1019,6 +1069,7 @@ impl Executor {
             moving,
             consumed,
             stopped_at,
+            program_stop,
         }
     }
 
@@ -2424,6 +2475,69 @@ mod simulation {
         assert_eq!(out.last().unwrap().position.x, 30.0);
         assert_eq!(steps, 3, "one step per line");
         assert!(out.len() > 2000);
+    }
+
+    /// M0 and M1 (with the optional-stop switch on) bring the tool to rest
+    /// at the end of the move before them, in blend mode too, and hold it
+    /// there, however long, until the operator releases the stop; M1 with
+    /// the switch off passes without stopping. A release sent while the
+    /// tool moves does not pass the stop it reaches afterwards.
+    #[test]
+    fn program_stops_wait_at_rest_for_the_operator() {
+        let text = "G64 P0.01\nG1 X10 F3000\nM0\nX20\nM1\nX30\nM1\nX40\nM2\n";
+        let mut q = planned(text, PathMode::Blend { tolerance: 0.01 });
+        let stops = q
+            .iter()
+            .filter(|s| matches!(s.kind, SegmentKind::ProgramStop { .. }))
+            .count();
+        assert_eq!(stops, 3, "M0, M1, M1 are each a stop marker");
+        let mut first_wait = None;
+        let out = run(&mut q, |n, ex| {
+            if n == 100 {
+                // Early, while moving: must not pass the M0 to come.
+                ex.release_stop();
+            }
+            if ex.position().x == 10.0 && first_wait.is_none() {
+                first_wait = Some(n);
+            }
+            // The operator resumes 3 s after the tool reached the M0 and
+            // 6 s after (at the first M1); turning the optional-stop switch
+            // off at 5 s, while the tool waits at that M1, does not start
+            // it, but the second M1 passes.
+            if first_wait.is_some_and(|f| n == f + 3000 || n == f + 6000) {
+                ex.release_stop();
+            }
+            if first_wait.is_some_and(|f| n == f + 5000) {
+                ex.set_optional_stop(false);
+            }
+        });
+        let f = first_wait.expect("reached X10");
+        let waiting: Vec<usize> = (0..out.len()).filter(|&n| out[n].program_stop).collect();
+        // At rest at X10 from arrival until the release, without moving.
+        for n in f + 1..f + 3000 {
+            assert!(out[n].program_stop, "waiting at {n}");
+            assert_eq!(out[n].position.x, 10.0);
+            assert_eq!(out[n].velocity, 0.0);
+            assert!(!out[n].moving);
+            assert_eq!(out[n].line, 3, "on the M0's line");
+        }
+        assert!(!out[f + 3001].program_stop, "released");
+        // The M1 at line 5 waited at X20 (the switch was still on when the
+        // tool got there); the one at line 7 did not.
+        let at_m1: Vec<&Sample> = waiting
+            .iter()
+            .map(|&n| &out[n])
+            .filter(|s| s.line == 5)
+            .collect();
+        assert!(!at_m1.is_empty() && at_m1.iter().all(|s| s.position.x == 20.0));
+        assert!(out[f + 5999].program_stop && out[f + 5999].line == 5);
+        assert!(
+            waiting.iter().all(|&n| out[n].line != 7),
+            "M1 with the switch off"
+        );
+        assert_eq!(out.last().unwrap().position.x, 40.0);
+        let (_, a, j) = limit_use(&out);
+        assert!(a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6, "a {a} j {j}");
     }
 
     /// A random program of 20 pieces from `rng`: rapids, long and tiny

@@ -384,6 +384,9 @@ pub fn run(
         // Offline, an M66 reads its input at once (the interpreter's
         // offline environment answers it), so a wait never holds.
         executor.release_input();
+        // Nobody is there to resume a program stop (M0, M1): it passes,
+        // and the cycle time leaves out the operator's part.
+        executor.release_stop();
         let sample = executor.tick(dt, a, b);
         for s in queue.drain(..sample.consumed) {
             if s.is_motion() && s.line != finished[1] {

@@ -42,6 +42,12 @@ pub enum SegmentKind {
     /// out. Whoever runs the executor polls the input and then calls
     /// [`Executor::release_input`](crate::Executor::release_input).
     WaitInput(InputRequest),
+    /// M0, M60 (`optional: false`) and M1 (`optional: true`): come to rest
+    /// here and wait until the operator resumes. M1 waits only while the
+    /// optional-stop switch is on ([`Executor::set_optional_stop`]).
+    ///
+    /// [`Executor::set_optional_stop`]: crate::Executor::set_optional_stop
+    ProgramStop { optional: bool },
 }
 
 /// What an M66 waits for.
@@ -1319,13 +1325,13 @@ impl<'k> Planner<'k> {
                 );
                 self.arc(canon, arc)?;
             }
-            // The machine comes to rest: program end, and the program stops
-            // (M0, M1, M60) that the daemon turns into a pause.
-            CanonCmd::ProgramEnd
-            | CanonCmd::ProgramStop
-            | CanonCmd::OptionalProgramStop
-            | CanonCmd::PalletShuttle
-            | CanonCmd::Finish => self.finish(),
+            // The machine comes to rest at the program's end, and for a
+            // pallet change (M30 and M60 ask for one; kerf drives no
+            // shuttle, and M60's program stop follows it).
+            CanonCmd::ProgramEnd | CanonCmd::Finish | CanonCmd::PalletShuttle => self.finish(),
+            // And at a program stop, where it waits for the operator.
+            CanonCmd::ProgramStop => self.stop_marker(line, false),
+            CanonCmd::OptionalProgramStop => self.stop_marker(line, true),
             CanonCmd::StraightProbe { .. } => return unsupported("a probe move (G38.x)"),
             CanonCmd::RigidTap { .. } => return unsupported("rigid tapping (G33.1, G84 rigid)"),
             CanonCmd::StartSpeedFeedSync { .. } => {
@@ -1459,6 +1465,16 @@ impl<'k> Planner<'k> {
                 format!("no analog output {n}: the machine has {count} ([hal.pins] analog_out)"),
             )),
         }
+    }
+
+    /// A program stop: everything before it runs to rest first.
+    fn stop_marker(&mut self, line: u32, optional: bool) {
+        self.finish();
+        self.ready.push_back(Segment::marker(
+            SegmentKind::ProgramStop { optional },
+            line,
+            self.position,
+        ));
     }
 
     /// An immediate output: everything before it runs to rest first.

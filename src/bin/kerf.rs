@@ -60,10 +60,16 @@ enum Cmd {
     },
     /// Feed hold: decelerate on the path and wait.
     Pause,
-    /// Release feed hold or single-block stepping.
+    /// Release feed hold, single-block stepping or a program stop (M0, M1).
     Resume,
     /// Single-block: run the next line (from idle, starts the opened program).
     Step,
+    /// Turn the optional-stop switch on or off: whether M1 stops the program.
+    OptionalStop {
+        /// `on` or `off`.
+        #[arg(value_parser = ["on", "off"])]
+        state: String,
+    },
     /// Stop the program, MDI, jog or homing, decelerating on the path.
     Abort,
     /// Emergency stop: drives off at once.
@@ -353,6 +359,17 @@ fn main() -> ExitCode {
         Cmd::Pause => simple(Command::Pause, "paused"),
         Cmd::Resume => simple(Command::Resume, "resumed"),
         Cmd::Step => simple(Command::Step, "stepping"),
+        Cmd::OptionalStop { state } => {
+            let enabled = state == "on";
+            simple(
+                Command::OptionalStop { enabled },
+                if enabled {
+                    "optional stop on: M1 stops the program"
+                } else {
+                    "optional stop off: M1 is passed"
+                },
+            )
+        }
         Cmd::Abort => simple(Command::Abort, "aborted"),
         Cmd::Estop => simple(Command::Estop, "e-stop"),
         Cmd::Reset => simple(Command::Reset, "reset: the machine is off; `kerf on` next"),

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use super::{fmt_position, print_json, Failure, FAILED};
 use crate::client::Client;
-use crate::protocol::{Command, ProgramState};
+use crate::protocol::{Command, Execution, ProgramState};
 
 /// Send `file` to kerfd (from line `from`), show progress, and fail if the
 /// program fails. With `json`, print only the final status as JSON.
@@ -21,21 +21,29 @@ pub fn run(socket: &Path, file: &Path, from: Option<u32>, json: bool) -> Result<
         .as_u64()
         .ok_or_else(|| Failure::new(format!("bad run reply: {reply}")))? as u32;
     let tty = std::io::stdout().is_terminal() && !json;
-    let mut last_line = u32::MAX;
+    let mut last = (u32::MAX, false);
     let started = std::time::Instant::now();
     let end = client.wait_job(id, 10.0, |status| {
         let Some(program) = status.program.as_ref().filter(|p| p.id == id) else {
             return;
         };
-        if json || status.line == last_line {
+        // Paused: a feed hold, or a program stop (M0, M1) that waits for
+        // the operator, who may be at another terminal.
+        let paused = status.execution == Some(Execution::Paused);
+        if json || (status.line, paused) == last {
             return;
         }
-        last_line = status.line;
+        last = (status.line, paused);
         let text = format!(
-            "line {:>6}/{}  {}",
+            "line {:>6}/{}  {}{}",
             status.line,
             program.lines,
-            fmt_position(status)
+            fmt_position(status),
+            if paused {
+                "  paused: `kerf resume` goes on"
+            } else {
+                ""
+            }
         );
         if tty {
             print!("\r{text}");
