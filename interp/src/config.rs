@@ -138,8 +138,6 @@ pub struct Config {
     pub axes: [bool; 9],
     /// Skip lines that start with `/` (the block delete switch).
     pub block_delete: bool,
-    /// Stop at M1 (the optional stop switch).
-    pub optional_stop: bool,
     /// Directories searched for `O<name> call` files and remap subroutines.
     pub subroutine_path: Vec<PathBuf>,
     /// Directories searched for user M-code programs `M100`–`M199`.
@@ -200,7 +198,6 @@ impl Default for Config {
             user_units_per_mm: 1.0,
             axes: [true; 9],
             block_delete: false,
-            optional_stop: true,
             subroutine_path: Vec::new(),
             user_m_path: Vec::new(),
             remaps: Vec::new(),
