@@ -1107,7 +1107,9 @@ fn run_virtual(tick: &mut ServoTick, status: &mut Writer<Snapshot>, stop: &Atomi
         // millisecond of wall time would advance the simulation (its
         // seeded noise, the controllers) by however long the client took
         // between commands, and a run would depend on it.
-        let busy = moving || tick.queue.slots() > 0 || tick.has_commands();
+        // So is a program stop: it waits on the operator too.
+        let queued = tick.queue.slots() > 0 && !tick.snapshot().at_program_stop;
+        let busy = moving || queued || tick.has_commands();
         if busy {
             settle = VIRTUAL_SETTLE_TICKS;
         } else if settle == 0 {

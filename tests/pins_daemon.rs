@@ -90,13 +90,7 @@ fn m66_answers_the_program_from_the_machines_input() {
                 "G21 G90\nM66 P0 {wait}\no100 if [#5399 EQ -1]\nG0 X5\no100 else\nG0 X7\no100 endif\nM2\n"
             ),
         );
-        let reply = client
-            .request(&Command::Run {
-                path: Some(program.display().to_string()),
-                line: None,
-            })
-            .unwrap();
-        let id = reply["program"].as_u64().unwrap() as u32;
+        let id = support::start_program(&mut client, &program);
         let end = client.wait_job(id, 50.0, |_| {}).unwrap();
         let p = end.program.as_ref().unwrap();
         assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);

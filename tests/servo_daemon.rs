@@ -5,7 +5,7 @@
 mod support;
 
 use kerf::client::{Client, ClientError};
-use kerf::protocol::{Command, ErrorCode, Event, ProgramState, Status};
+use kerf::protocol::{Command, ErrorCode, Event, Execution, ProgramState, Status};
 use kerf_io::sim::cutting::CuttingConfig;
 use support::Kerfd;
 
@@ -91,13 +91,7 @@ fn virtual_clock_cut_with_force_control_from_the_socket() {
     // stop in the material is held (the machine changed speed there).
     let text = "G21 G90\nG0 X0 Y50\nG0 Z-2\nG1 X60 F300\nG0 Z0\nM2\n";
     let program = kerfd.program("cut.ngc", text);
-    let reply = client
-        .request(&Command::Run {
-            path: Some(program.display().to_string()),
-            line: None,
-        })
-        .unwrap();
-    let id = reply["program"].as_u64().unwrap() as u32;
+    let id = support::start_program(&mut client, &program);
     let end = follow(&mut client, |s| {
         s.program
             .as_ref()
@@ -184,4 +178,35 @@ fn wall_clock_status_reports_wake_up_latency() {
         "{text}"
     );
     assert!(text.contains("realtime  SCHED_FIFO"), "{text}");
+}
+
+/// On a virtual clock, time stands still while a program stop (M0) waits
+/// for the operator, as it does at idle: what the machine does next must
+/// not depend on how long the operator took. Once the stop's settling
+/// ticks have run, the tick count stays put however many status round
+/// trips pass; `resume` then finishes the program.
+#[test]
+fn virtual_time_stands_still_at_a_program_stop() {
+    let kerfd = Kerfd::start(&["--virtual-clock"]);
+    let mut client = kerfd.ready_client();
+    let program = kerfd.program("stop.ngc", "G21 G90\nG1 X10 F3000\nM0\nG1 X20\nM2\n");
+    let id = support::start_program(&mut client, &program);
+    let paused = follow(&mut client, |s| s.execution == Some(Execution::Paused));
+    assert_eq!(paused.position["x"], 10.0);
+    let ticks: Vec<u64> = (0..100).map(|_| status(&mut client).servo.ticks).collect();
+    // The servo settles for at most 200 ticks, then waits.
+    assert!(
+        ticks[99] <= paused.servo.ticks + 250,
+        "virtual time ran on at the stop: {} -> {} ticks",
+        paused.servo.ticks,
+        ticks[99]
+    );
+    client.request(&Command::Resume).unwrap();
+    let end = follow(&mut client, |s| {
+        s.program
+            .as_ref()
+            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
+    });
+    assert_eq!(end.program.unwrap().state, ProgramState::Finished);
+    assert_eq!(end.position["x"], 20.0);
 }

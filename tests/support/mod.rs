@@ -136,6 +136,17 @@ pub fn ready(c: &mut Client) {
     assert_eq!(end.state, MachineState::Idle, "{end:?}");
 }
 
+/// Start the program at `path` from its first line; returns its job id.
+pub fn start_program(c: &mut Client, path: &std::path::Path) -> u32 {
+    let reply = c
+        .request(&Cmd::Run {
+            path: Some(path.display().to_string()),
+            line: None,
+        })
+        .expect("run");
+    reply["program"].as_u64().expect("a program id") as u32
+}
+
 /// Status now.
 pub fn status(c: &mut Client) -> Status {
     c.status().expect("status")
