@@ -411,6 +411,15 @@ impl ServoTick {
         !self.commands.is_empty()
     }
 
+    /// True while queued motion waits on the operator alone: at a program
+    /// stop (M0, M1), or at rest under feed hold or between single blocks.
+    /// An M66 wait does not count: its timeout runs on servo time.
+    pub fn waiting_on_operator(&self) -> bool {
+        let snap = &self.snapshot;
+        snap.at_program_stop
+            || (!snap.moving && (snap.hold || snap.single_block) && self.input_wait.is_none())
+    }
+
     /// True once everything the executor needs ahead is queued: the queue
     /// is empty, full, or holds a `Stop` marker (the rest of a program) or
     /// an M66 wait (the planner waits for its answer).
@@ -1107,8 +1116,9 @@ fn run_virtual(tick: &mut ServoTick, status: &mut Writer<Snapshot>, stop: &Atomi
         // millisecond of wall time would advance the simulation (its
         // seeded noise, the controllers) by however long the client took
         // between commands, and a run would depend on it.
-        // So is a program stop: it waits on the operator too.
-        let queued = tick.queue.slots() > 0 && !tick.snapshot().at_program_stop;
+        // So is motion held for the operator (a program stop, feed hold,
+        // single block): how long they take must not matter either.
+        let queued = tick.queue.slots() > 0 && !tick.waiting_on_operator();
         let busy = moving || queued || tick.has_commands();
         if busy {
             settle = VIRTUAL_SETTLE_TICKS;

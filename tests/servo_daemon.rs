@@ -7,7 +7,7 @@ mod support;
 use kerf::client::{Client, ClientError};
 use kerf::protocol::{Command, ErrorCode, Event, Execution, ProgramState, Status};
 use kerf_io::sim::cutting::CuttingConfig;
-use support::Kerfd;
+use support::{axis, Kerfd};
 
 const ALUMINIUM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/aluminium-step.toml");
 
@@ -32,6 +32,15 @@ fn follow(client: &mut Client, mut done: impl FnMut(&Status) -> bool) -> Status 
             }
         }
     }
+}
+
+/// Follow status until program `id` no longer runs; its last status.
+fn follow_to_end(client: &mut Client, id: u32) -> Status {
+    follow(client, |s| {
+        s.program
+            .as_ref()
+            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
+    })
 }
 
 fn refusal(e: ClientError) -> (ErrorCode, String) {
@@ -92,11 +101,7 @@ fn virtual_clock_cut_with_force_control_from_the_socket() {
     let text = "G21 G90\nG0 X0 Y50\nG0 Z-2\nG1 X60 F300\nG0 Z0\nM2\n";
     let program = kerfd.program("cut.ngc", text);
     let id = support::start_program(&mut client, &program);
-    let end = follow(&mut client, |s| {
-        s.program
-            .as_ref()
-            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
-    });
+    let end = follow_to_end(&mut client, id);
     let p = end.program.as_ref().unwrap();
     assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);
     // The slot ended 4 mm deep at 300 mm/min programmed; the force is
@@ -180,33 +185,60 @@ fn wall_clock_status_reports_wake_up_latency() {
     assert!(text.contains("realtime  SCHED_FIFO"), "{text}");
 }
 
-/// On a virtual clock, time stands still while a program stop (M0) waits
-/// for the operator, as it does at idle: what the machine does next must
-/// not depend on how long the operator took. Once the stop's settling
-/// ticks have run, the tick count stays put however many status round
-/// trips pass; `resume` then finishes the program.
+/// Status round trips after the servo came to rest waiting on the
+/// operator: the tick count must stay put (the servo settles for at most
+/// 200 ticks, then waits) however long they take.
+fn assert_time_stands_still(client: &mut Client, rest: &Status, what: &str) {
+    let ticks: Vec<u64> = (0..100).map(|_| status(client).servo.ticks).collect();
+    assert!(
+        ticks[99] <= rest.servo.ticks + 250,
+        "virtual time ran on {what}: {} -> {} ticks",
+        rest.servo.ticks,
+        ticks[99]
+    );
+}
+
+/// On a virtual clock, time stands still while motion waits on the
+/// operator — at a program stop (M0), under feed hold, between single
+/// blocks — as it does at idle: what the machine does next must not depend
+/// on how long the operator took. Each time, going on finishes the program
+/// where it should.
 #[test]
-fn virtual_time_stands_still_at_a_program_stop() {
+fn virtual_time_stands_still_while_the_operator_decides() {
     let kerfd = Kerfd::start(&["--virtual-clock"]);
     let mut client = kerfd.ready_client();
     let program = kerfd.program("stop.ngc", "G21 G90\nG1 X10 F3000\nM0\nG1 X20\nM2\n");
     let id = support::start_program(&mut client, &program);
     let paused = follow(&mut client, |s| s.execution == Some(Execution::Paused));
     assert_eq!(paused.position["x"], 10.0);
-    let ticks: Vec<u64> = (0..100).map(|_| status(&mut client).servo.ticks).collect();
-    // The servo settles for at most 200 ticks, then waits.
-    assert!(
-        ticks[99] <= paused.servo.ticks + 250,
-        "virtual time ran on at the stop: {} -> {} ticks",
-        paused.servo.ticks,
-        ticks[99]
-    );
+    assert_time_stands_still(&mut client, &paused, "at a program stop");
     client.request(&Command::Resume).unwrap();
-    let end = follow(&mut client, |s| {
-        s.program
-            .as_ref()
-            .is_some_and(|p| p.id == id && p.state != ProgramState::Running)
-    });
+    let end = follow_to_end(&mut client, id);
     assert_eq!(end.program.unwrap().state, ProgramState::Finished);
     assert_eq!(end.position["x"], 20.0);
+
+    // Feed hold on a 10 s move, sent right after `run` (on a virtual
+    // clock the machine would finish first if the test waited for it to
+    // get going), then single block.
+    let program = kerfd.program("long.ngc", "G21 G90\nG1 X100 F600\nG1 Y10\nG1 Y20\nM2\n");
+    let id = support::start_program(&mut client, &program);
+    client.request(&Command::Pause).unwrap();
+    let held = follow(&mut client, |s| {
+        s.execution == Some(Execution::Paused) && s.velocity == 0.0
+    });
+    let x = axis(&held, "x");
+    assert!(x < 90.0, "held at X{x}");
+    assert_time_stands_still(&mut client, &held, "under feed hold");
+    // `step` resumes in single-block mode: line 2 ends — where the
+    // corner's blend into Y10 begins, within the default G64 tolerance of
+    // X100 — and the machine waits there, showing line 3 as the next.
+    client.request(&Command::Step).unwrap();
+    let block = follow(&mut client, |s| axis(s, "x") > 99.9 && s.velocity == 0.0);
+    assert_eq!(block.execution, Some(Execution::Stepping));
+    assert_eq!((block.line, axis(&block, "y")), (3, 0.0));
+    assert_time_stands_still(&mut client, &block, "between single blocks");
+    client.request(&Command::Resume).unwrap();
+    let end = follow_to_end(&mut client, id);
+    assert_eq!(axis(&end, "y"), 20.0);
+    assert_eq!(end.program.unwrap().state, ProgramState::Finished);
 }
