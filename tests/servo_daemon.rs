@@ -217,17 +217,23 @@ fn virtual_time_stands_still_while_the_operator_decides() {
     assert_eq!(end.program.unwrap().state, ProgramState::Finished);
     assert_eq!(end.position["x"], 20.0);
 
-    // Feed hold on a 10 s move, sent right after `run` (on a virtual
-    // clock the machine would finish first if the test waited for it to
-    // get going), then single block.
+    // Feed hold, then single block. The feed override is at 0 % until
+    // the hold is on: on a virtual clock the machine would otherwise
+    // finish the move before a client could send `pause`.
     let program = kerfd.program("long.ngc", "G21 G90\nG1 X100 F600\nG1 Y10\nG1 Y20\nM2\n");
+    let feed = |percent: f64| Command::Override {
+        feed: Some(percent),
+        rapid: None,
+        spindle: None,
+    };
+    client.request(&feed(0.0)).unwrap();
     let id = support::start_program(&mut client, &program);
     client.request(&Command::Pause).unwrap();
+    client.request(&feed(100.0)).unwrap();
     let held = follow(&mut client, |s| {
         s.execution == Some(Execution::Paused) && s.velocity == 0.0
     });
-    let x = axis(&held, "x");
-    assert!(x < 90.0, "held at X{x}");
+    assert_eq!(axis(&held, "x"), 20.0, "held where the last program ended");
     assert_time_stands_still(&mut client, &held, "under feed hold");
     // `step` resumes in single-block mode: line 2 ends — where the
     // corner's blend into Y10 begins, within the default G64 tolerance of
