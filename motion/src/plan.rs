@@ -254,9 +254,37 @@ impl Default for PlannerConfig {
     }
 }
 
-/// A blend the planner chose: its legs, control points, the frame it ends
-/// with, and its sampled table if already worked out.
-type Chosen = ((f64, f64), [Vec9; 6], Frame, Option<(Blend, BlendExtremes)>);
+/// A blend the planner chose at the corner between the first two waiting
+/// moves. Kept small (no control points, no 9-axis frame): it is passed
+/// by value through the choice, and copies of a larger one showed in
+/// profiles.
+struct Chosen {
+    /// Where it leaves the first move and joins the second, from their
+    /// common vertex, mm.
+    legs: (f64, f64),
+    /// The blend with its arc-length table, and what its limits need.
+    blend: (Blend, BlendExtremes),
+    /// X Y Z of the point, unit tangent and curvature it ends with on the
+    /// second move (the start of the next blend if that takes the rest).
+    end: [[f64; 3]; 3],
+}
+
+impl Chosen {
+    /// The blend with control points `control`, sampled unless `sampled`
+    /// already is (by the blend worker), ending with `end`.
+    fn new(
+        legs: (f64, f64),
+        control: &[Vec9; 6],
+        sampled: Option<&(Blend, BlendExtremes)>,
+        end: &Frame,
+    ) -> Chosen {
+        Chosen {
+            legs,
+            blend: sampled.copied().unwrap_or_else(|| Blend::sampled(*control)),
+            end: [&end.point, &end.tangent, &end.curvature].map(|v| [v[0], v[1], v[2]]),
+        }
+    }
+}
 
 /// A move waiting for its successors, which decide its end.
 #[derive(Clone, Copy, Debug)]
@@ -1744,32 +1772,27 @@ impl<'k> Planner<'k> {
             }
             if !both_lines {
                 if let Some((legs, control, end)) = self.choose_arc_blend() {
-                    self.blend_corner(legs, control, end, None);
+                    self.blend_corner(Chosen::new(legs, &control, None, &end));
                     continue;
                 }
             }
-            let Some((legs, control, mid, sampled)) = self.choose_blend(both_lines) else {
+            let Some(chosen) = self.choose_blend(both_lines) else {
                 // No blend here, or none fits: stop (or go straight on) at
                 // the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
                 self.release_front(exit);
                 continue;
             };
-            self.blend_corner(legs, control, mid, sampled);
+            self.blend_corner(chosen);
         }
     }
 
-    /// Trim the first two waiting moves (lines or arcs) by `legs`, emit
-    /// the first, and emit the blend with control points `control` that
-    /// joins them; the second keeps waiting, with `mid`, where the blend
-    /// ends, for the blend after it if that one takes the rest of it.
-    fn blend_corner(
-        &mut self,
-        legs: (f64, f64),
-        control: [Vec9; 6],
-        mid: Frame,
-        sampled: Option<(Blend, BlendExtremes)>,
-    ) {
+    /// Trim the first two waiting moves (lines or arcs) by the chosen
+    /// blend's legs, emit the first, and emit the blend that joins them;
+    /// the second keeps waiting, with where the blend ends, for the blend
+    /// after it if that one takes the rest of it.
+    fn blend_corner(&mut self, chosen: Chosen) {
+        let legs = chosen.legs;
         // Trim a and b in place: a waiting move is over a kilobyte, and
         // copies of them showed in profiles.
         let a = &mut self.pending[0];
@@ -1800,7 +1823,7 @@ impl<'k> Planner<'k> {
         b.segment.length = b.segment.shape.length();
         b.start_leg = legs.1;
         // X Y Z only: blends join lines that move nothing else.
-        b.mid = [&mid.point, &mid.tangent, &mid.curvature].map(|v| [v[0], v[1], v[2]]);
+        b.mid = chosen.end;
         let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
         let b_force = b.segment.force_control;
         // Move b's motion now starts with the blend.
@@ -1810,8 +1833,7 @@ impl<'k> Planner<'k> {
         } else {
             SegmentKind::Feed
         };
-        // The blend's table and what its limits need in one pass.
-        let (shape, extremes) = sampled.unwrap_or_else(|| Blend::sampled(control));
+        let (shape, extremes) = chosen.blend;
         let mut blend =
             self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
         blend.feed = a_feed.min(b_feed);
@@ -1980,19 +2002,19 @@ impl<'k> Planner<'k> {
             let through = |mid: Frame| {
                 let bl = self.blend_within(a, b, legs, &start, &mid)?;
                 self.blend_within(b, c, legs_bc, &mid, &c_start)?;
-                Some((legs, bl, mid, None))
+                Some(Chosen::new(legs, &bl, None, &mid))
             };
             let fitted = if let Some(Speculation {
                 worked: Worked::Dense { fit, ab, bc },
                 sampled,
                 ..
-            }) = worked
+            }) = worked.as_deref()
             {
                 match (fit, ab, bc) {
                     (Some(mid), Some(ab), Some(bc))
-                        if self.blend_in_reach(&ab) && self.blend_in_reach(&bc) =>
+                        if self.blend_in_reach(ab) && self.blend_in_reach(bc) =>
                     {
-                        Some((legs, ab, mid, sampled))
+                        Some(Chosen::new(legs, ab, sampled.as_ref(), mid))
                     }
                     _ => None,
                 }
@@ -2011,13 +2033,13 @@ impl<'k> Planner<'k> {
             worked: Worked::Corner { chosen },
             sampled,
             ..
-        }) = worked
+        }) = worked.as_deref()
         {
             match chosen {
                 // The first legs whose blend is within the tolerance, if
                 // in reach; else what comes after them is to be tried.
-                Some((legs, control)) if self.blend_in_reach(&control) => {
-                    return Some((legs, control, end(legs)?, sampled));
+                Some((legs, control)) if self.blend_in_reach(control) => {
+                    return Some(Chosen::new(*legs, control, sampled.as_ref(), &end(*legs)?));
                 }
                 Some(_) => {}
                 // None of the legs gives a blend within the tolerance.
@@ -2033,7 +2055,7 @@ impl<'k> Planner<'k> {
             };
             let to = end(legs)?;
             if let Some(control) = self.blend_within(a, b, legs, &from, &to) {
-                return Some((legs, control, to, None));
+                return Some(Chosen::new(legs, &control, None, &to));
             }
         }
         None

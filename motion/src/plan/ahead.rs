@@ -131,6 +131,24 @@ pub(super) struct Speculation {
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
+/// A speculation [`Ahead::take`] found usable, still in its slot (the
+/// slot stays locked while the planner reads it; the worker is elsewhere
+/// by then, LEAD junctions ahead); dropping it empties the slot.
+pub(super) struct Taken<'a>(MutexGuard<'a, Slot>);
+
+impl std::ops::Deref for Taken<'_> {
+    type Target = Speculation;
+    fn deref(&self) -> &Speculation {
+        self.0.speculation.as_ref().expect("take checked it")
+    }
+}
+
+impl Drop for Taken<'_> {
+    fn drop(&mut self) {
+        self.0.speculation = None;
+    }
+}
+
 /// What the worker worked out at a junction, by the planner's branch.
 /// (Not boxed: it lives in a slot of a ring made once.)
 #[allow(clippy::large_enum_variant)]
@@ -395,7 +413,7 @@ impl Ahead {
         start: &Frame,
         legs: (f64, f64),
         legs_bc: Option<(f64, f64)>,
-    ) -> Option<Speculation> {
+    ) -> Option<Taken<'_>> {
         if !self.shared.takes(index) {
             return None;
         }
@@ -411,7 +429,9 @@ impl Ahead {
             slot.fit = None;
             return None;
         }
-        let s = slot.speculation.take()?;
+        // Checked and read in place: a speculation is over 1.5 kB, and
+        // copying it out showed in profiles.
+        let s = slot.speculation.as_ref()?;
         let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
         let frame_same = |a: &Frame, b: &Frame| {
             same(&a.point, &b.point)
@@ -426,11 +446,12 @@ impl Ahead {
                 _ => false,
             };
         if !(legs_same && frame_same(&s.start, start)) {
+            slot.speculation = None;
             return None;
         }
         #[cfg(test)]
         self.count(|t| t.taken += 1);
-        Some(s)
+        Some(Taken(slot))
     }
 
     /// The fitted frame at the midpoint of move `index` (the second line
@@ -691,8 +712,9 @@ impl Worker {
     /// Work out junction `j` (moves j − 1, j and j + 1), seeing moves
     /// before `end`, into its slot, unless the planner has claimed it.
     fn junction(&mut self, j: u64, end: u64) {
-        let at = |k: u64| match self.moves[(k - self.first) as usize] {
-            Move::Line { line, mode } => Some((line, mode)),
+        // By reference: a programmed line is over 200 bytes.
+        let at = |k: u64| match &self.moves[(k - self.first) as usize] {
+            Move::Line { line, mode } => Some((line, *mode)),
             Move::Other => None,
         };
         let (Some((a, _)), Some((b, b_mode))) = (at(j - 1), at(j)) else {
@@ -701,11 +723,11 @@ impl Worker {
         let PathMode::Blend { tolerance } = b_mode else {
             return;
         };
-        let Some(legs) = blend_legs(&a, &b, b_mode) else {
+        let Some(legs) = blend_legs(a, b, b_mode) else {
             return;
         };
         let c = at(j + 1);
-        let legs_bc = c.and_then(|(c, c_mode)| blend_legs(&b, &c, c_mode));
+        let legs_bc = c.and_then(|(c, c_mode)| blend_legs(b, c, c_mode));
         // The planner's branches (`Planner::choose_blend`): a dense curve
         // where blends take whole halves of a and b, a corner where they
         // take neither. Between the two, where the blend starts depends on
@@ -746,42 +768,58 @@ impl Worker {
         } else {
             return;
         };
+        // Dense: the blend from a's fitted midpoint to b's, and on to c.
+        let dense = match (a_whole, c, legs_bc) {
+            (true, Some((c, c_mode)), Some(legs_bc)) => {
+                let PathMode::Blend { tolerance: tol_c } = c_mode else {
+                    return;
+                };
+                Some((c, tol_c, legs_bc))
+            }
+            _ => None,
+        };
         let mut slot = self.shared.slot(j);
         if slot.index == j {
             // The planner got here first.
             return;
         }
-        let mut s = Speculation {
+        slot.index = j;
+        slot.fit = None;
+        // Worked out in its slot (locked meanwhile): a speculation is over
+        // 1.5 kB, and copying one in showed in profiles.
+        let s = slot.speculation.insert(Speculation {
             start,
             legs,
             legs_bc,
             worked: Worked::Corner { chosen: None },
             sampled: None,
-        };
-        if let (true, Some((c, c_mode)), Some(legs_bc)) = (a_whole, c, legs_bc) {
-            let PathMode::Blend { tolerance: tol_c } = c_mode else {
-                return;
+        });
+        if let Some((c, tol_c, legs_bc)) = dense {
+            s.worked = Worked::Dense {
+                fit: Self::fit(&mut self.last_fit, moves, chords, first, j, end),
+                ab: None,
+                bc: None,
             };
-            let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
-            let (mut ab, mut bc) = (None, None);
-            if let Some(mid) = &fit {
-                let (control, near) = blend_near(&a, &b, tolerance, legs, &start, mid);
+            let Worked::Dense { fit, ab, bc } = &mut s.worked else {
+                unreachable!("just set");
+            };
+            if let Some(mid) = fit {
+                let (control, near) = blend_near(a, b, tolerance, legs, &s.start, mid);
                 if near {
-                    ab = Some(control);
+                    *ab = Some(control);
                     let c_start = c.frame_at(legs_bc.1, false);
-                    let (control, near) = blend_near(&b, &c, tol_c, legs_bc, mid, &c_start);
+                    let (control_bc, near) = blend_near(b, c, tol_c, legs_bc, mid, &c_start);
                     if near {
-                        bc = Some(control);
-                        s.sampled = ab.map(Blend::sampled);
+                        *bc = Some(control_bc);
+                        s.sampled = Some(Blend::sampled(control));
                     }
                 }
             }
-            s.worked = Worked::Dense { fit, ab, bc };
         } else {
             // The planner's corner: the tolerance's legs, then shorter.
             for legs in corner_legs(legs) {
                 let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
-                let (control, near) = blend_near(&a, &b, tolerance, legs, &from, &to);
+                let (control, near) = blend_near(a, b, tolerance, legs, &from, &to);
                 if near {
                     s.worked = Worked::Corner {
                         chosen: Some((legs, control)),
@@ -791,9 +829,6 @@ impl Worker {
                 }
             }
         }
-        slot.index = j;
-        slot.speculation = Some(s);
-        slot.fit = None;
     }
 }
 
