@@ -412,12 +412,16 @@ impl ServoTick {
     }
 
     /// True while queued motion waits on the operator alone: at a program
-    /// stop (M0, M1), or at rest under feed hold or between single blocks.
-    /// An M66 wait does not count: its timeout runs on servo time.
+    /// stop (M0, M1), or at rest under feed hold, between single blocks or
+    /// with a feed or rapid override at 0 %. An M66 wait does not count:
+    /// its timeout runs on servo time.
     pub fn waiting_on_operator(&self) -> bool {
         let snap = &self.snapshot;
-        snap.at_program_stop
-            || (!snap.moving && (snap.hold || snap.single_block) && self.input_wait.is_none())
+        let operator_zero = snap.hold
+            || snap.single_block
+            || snap.feed_override == 0.0
+            || snap.rapid_override == 0.0;
+        snap.at_program_stop || (!snap.moving && operator_zero && self.input_wait.is_none())
     }
 
     /// True once everything the executor needs ahead is queued: the queue

@@ -199,8 +199,8 @@ fn assert_time_stands_still(client: &mut Client, rest: &Status, what: &str) {
 }
 
 /// On a virtual clock, time stands still while motion waits on the
-/// operator — at a program stop (M0), under feed hold, between single
-/// blocks — as it does at idle: what the machine does next must not depend
+/// operator — at a program stop (M0), at a 0 % feed override, under feed
+/// hold, between single blocks — as it does at idle: what the machine does next must not depend
 /// on how long the operator took. Each time, going on finishes the program
 /// where it should.
 #[test]
@@ -228,6 +228,10 @@ fn virtual_time_stands_still_while_the_operator_decides() {
     };
     client.request(&feed(0.0)).unwrap();
     let id = support::start_program(&mut client, &program);
+    let waiting = follow(&mut client, |s| {
+        s.execution == Some(Execution::Running) && s.velocity == 0.0
+    });
+    assert_time_stands_still(&mut client, &waiting, "at a 0 % feed override");
     client.request(&Command::Pause).unwrap();
     client.request(&feed(100.0)).unwrap();
     let held = follow(&mut client, |s| {
