@@ -44,6 +44,22 @@ use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig};
 
 const TOLERANCE: f64 = 0.01;
 
+/// Issue 5's targets: planning throughput, segments/s; planned / bound on
+/// the circle and on the pocket and stellabee1.ngc; limit use.
+const TARGET_THROUGHPUT: f64 = 1_000_000.0;
+const TARGET_RATIO_CIRCLE: f64 = 1.05;
+const TARGET_RATIO: f64 = 1.10;
+const TARGET_LIMIT_USE: f64 = 1.0 + 1e-6;
+
+/// "met" or "MISSED", for a figure against its target.
+fn verdict(met: bool) -> &'static str {
+    if met {
+        "met"
+    } else {
+        "MISSED"
+    }
+}
+
 /// The polyline estimate of the lower bound on cycle time, s.
 fn polyline_bound(program: &str, kins: &dyn Kinematics, tolerance: f64) -> Option<f64> {
     let mut limits = [(f64::INFINITY, f64::INFINITY); 3];
@@ -229,13 +245,14 @@ fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     // Segments out (a line a blend consumes gives none, a blended corner
     // two) and canon commands in (one per programmed move) both count.
     println!(
-        "{name:<28} {planned:>9} segments  interp+plan {:>9.0} seg/s  plan {:>9.0} seg/s ({:.0}-{:.0}) {:>9.0} canon/s  less interp {:>9.0} seg/s  ({moves} canon)",
+        "{name:<28} {planned:>9} segments  interp+plan {:>9.0} seg/s  plan {:>9.0} seg/s ({:.0}-{:.0}) {:>9.0} canon/s  less interp {:>9.0} seg/s  ({moves} canon)  target {TARGET_THROUGHPUT:.0} seg/s (plan): {}",
         rate(total),
         rate(plan.0),
         rate(plan.2),
         rate(plan.1),
         moves as f64 / plan.0,
         rate(rest),
+        verdict(rate(plan.0) >= TARGET_THROUGHPUT),
     );
 }
 
@@ -250,7 +267,11 @@ fn worst(limits: &[LimitUse]) -> [f64; 3] {
     })
 }
 
-fn quality(name: &str, program: &str, kins: &dyn Kinematics) {
+/// A program's cycle time against the bound, deviation and limit use,
+/// with verdicts: the ratio against `target` (where issue 5 sets one),
+/// the deviation against `allowed` (the path tolerance, mm), limit use
+/// against 1 + 1e-6.
+fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>, allowed: f64) {
     let planner = PlannerConfig {
         mode: PathMode::Blend {
             tolerance: TOLERANCE,
@@ -292,13 +313,20 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics) {
     };
     let [av, aa, aj] = worst(&report.axes);
     let [jv, ja, jj] = worst(&report.joints);
+    let ratio = report.cycle_time / bound;
+    let ratio_verdict = match target {
+        Some(t) => format!("ratio<={t:.2} {}", verdict(ratio <= t)),
+        None => "ratio: no target".to_string(),
+    };
+    let most = [av, aa, aj, jv, ja, jj].into_iter().fold(0.0, f64::max);
     println!(
-        "{name:<33} {:>9.3} s {:>9.3} s {:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s {:>8}",
+        "{name:<33} {:>9.3} s {:>9.3} s {ratio:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s {:>8}  {ratio_verdict}, deviation {}, limits {}",
         report.cycle_time,
         bound,
-        report.cycle_time / bound,
         report.max_deviation,
         report.guard_takeovers,
+        verdict(report.max_deviation <= allowed),
+        verdict(most <= TARGET_LIMIT_USE),
     );
 }
 
@@ -327,17 +355,51 @@ fn main() {
         "program", "planned", "bound", "ratio", "poly", "deviation",
         "ax v", "ax a", "ax j", "jt v", "jt a", "jt j", "run", "bound", "guarded"
     );
-    quality("circle R20, 0.05 mm chords", &circle_small_segments(), kins);
-    quality("zig-zag pocket 60x40", &zigzag_pocket(), kins);
-    quality("spiral 0.02 mm, 20k seg", &spiral(20_000), kins);
+    let targeted = Some(TARGET_RATIO);
+    let circle = Some(TARGET_RATIO_CIRCLE);
+    quality(
+        "circle R20, 0.05 mm chords",
+        &circle_small_segments(),
+        kins,
+        circle,
+        TOLERANCE,
+    );
+    quality(
+        "zig-zag pocket 60x40",
+        &zigzag_pocket(),
+        kins,
+        targeted,
+        TOLERANCE,
+    );
+    quality(
+        "spiral 0.02 mm, 20k seg",
+        &spiral(20_000),
+        kins,
+        None,
+        TOLERANCE,
+    );
     if let Some(text) = &stellabee {
-        quality("stellabee1.ngc (G64 P0.01)", text, kins);
+        quality(
+            "stellabee1.ngc (G64 P0.01)",
+            text,
+            kins,
+            targeted,
+            TOLERANCE,
+        );
         // With LinuxCNC's collinear merge (G64 Q, merge.rs) as an inch
         // program would ask for it: P and Q 0.01 in = 0.254 mm, so the path
         // may stray 0.508 mm. (Q0.01 mm merges almost nothing here: the
         // file's points scatter more than that.)
         let merged = text.replacen("\nG64 \n", "\nG64 P0.01 Q0.01\n", 1);
         assert_ne!(&merged, text, "stellabee1.ngc has its G64 line");
-        quality("stellabee1.ngc G64 P.01 Q.01 in", &merged, kins);
+        // The path may stray P + Q from the programmed one.
+        let allowed = 2.0 * 0.01 * 25.4;
+        quality(
+            "stellabee1.ngc G64 P.01 Q.01 in",
+            &merged,
+            kins,
+            None,
+            allowed,
+        );
     }
 }
