@@ -131,9 +131,11 @@ pub(super) struct Speculation {
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
-/// A speculation [`Ahead::take`] found usable, still in its slot (the
-/// slot stays locked while the planner reads it; the worker is elsewhere
-/// by then, LEAD junctions ahead); dropping it empties the slot.
+/// A speculation [`Ahead::take`] found usable, still in its slot, which
+/// stays locked while the planner reads it. The worker has finished with
+/// that junction and works on later ones, whose slots are others (it is
+/// never SLOTS junctions ahead), so it does not wait for this one.
+/// Dropping it empties the slot.
 pub(super) struct Taken<'a>(MutexGuard<'a, Slot>);
 
 impl std::ops::Deref for Taken<'_> {
