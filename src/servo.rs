@@ -414,13 +414,13 @@ impl ServoTick {
     /// True while queued motion waits on the operator alone: at a program
     /// stop (M0, M1), or at rest under feed hold, between single blocks or
     /// with a feed or rapid override at 0 %. An M66 wait does not count:
-    /// its timeout runs on servo time.
+    /// its timeout runs on servo time; nor does a `step` the executor has
+    /// not acted on yet (it came before the motion it runs).
     pub fn waiting_on_operator(&self) -> bool {
         let snap = &self.snapshot;
-        let operator_zero = snap.hold
-            || snap.single_block
-            || snap.feed_override == 0.0
-            || snap.rapid_override == 0.0;
+        let between_blocks = snap.single_block && !self.executor.step_pending();
+        let operator_zero =
+            snap.hold || between_blocks || snap.feed_override == 0.0 || snap.rapid_override == 0.0;
         snap.at_program_stop || (!snap.moving && operator_zero && self.input_wait.is_none())
     }
 

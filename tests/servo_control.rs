@@ -36,6 +36,25 @@ fn identified_mill(extra: &str) -> Machine {
     kerf_machines::from_toml(&text, "mill3-identified").unwrap()
 }
 
+/// A servo tick on `machine` at 1 ms, reading a queue of `capacity`
+/// segments and a command queue of 8, with the two queues' write ends.
+fn servo_on(
+    machine: &Machine,
+    capacity: usize,
+) -> (
+    rtrb::Producer<Segment>,
+    rtrb::Producer<ServoCommand>,
+    ServoTick,
+) {
+    let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
+    let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
+    let (producer, consumer) = rtrb::RingBuffer::new(capacity);
+    let (commands, command_queue) = rtrb::RingBuffer::new(8);
+    let kins = machine.kinematics.clone();
+    let tick = ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue);
+    (producer, commands, tick.unwrap())
+}
+
 #[test]
 fn pure_pd_lags_by_v_over_kv_and_feedforward_removes_the_lag() {
     // 1000 mm/min along X. The loop is type 1 (the plant integrates): in
@@ -90,17 +109,12 @@ fn a_joint_lagging_beyond_its_limit_faults_and_disables_the_drives() {
     // comes during the acceleration, names joint 0, and stops everything.
     let machine = identified_mill("");
     let kins = machine.kinematics.clone();
-    let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
-    let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
-    let (mut producer, consumer) = rtrb::RingBuffer::new(64);
-    let (mut commands, command_queue) = rtrb::RingBuffer::new(4);
+    let (mut producer, mut commands, mut tick) = servo_on(&machine, 64);
     commands.push(ServoCommand::Enable(true)).unwrap();
     let canon = program("G1 X100 F1000\nM2\n");
     for seg in plan_program(canon, &*kins, Position::ZERO, PlannerConfig::default(), 1).unwrap() {
         producer.push(seg).unwrap();
     }
-    let mut tick =
-        ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue).unwrap();
     tick.configure(&machine.description);
     tick.set_feedforward(false);
     tick.set_following_error_limits(&[Some(0.1), None, None]);
@@ -202,15 +216,10 @@ fn the_program_and_the_operator_switch_force_control() {
 #[test]
 fn input_is_complete_when_the_queue_is_empty_full_or_holds_the_end() {
     let machine = identified_mill("");
-    let hal_config: kerf_io::HalConfig = machine.description.hal.clone().try_into().unwrap();
     // A tick reading a queue of `capacity` segments.
     let with_queue = |capacity: usize| {
-        let (producer, consumer) = rtrb::RingBuffer::new(capacity);
-        let (_c, command_queue) = rtrb::RingBuffer::new(4);
-        let hal = kerf_io::build(&hal_config, &[0.0, 0.0, 0.0]).unwrap();
-        let kins = machine.kinematics.clone();
-        let tick = ServoTick::new(0.001, Position::ZERO, kins, hal, consumer, command_queue);
-        (producer, tick.unwrap())
+        let (producer, _, tick) = servo_on(&machine, capacity);
+        (producer, tick)
     };
     let dwell = Segment::marker(SegmentKind::Dwell { seconds: 1.0 }, 1, Position::ZERO);
     let (mut producer, mut tick) = with_queue(3);
@@ -287,4 +296,46 @@ fn force_control_holds_the_target_through_a_depth_step() {
     assert!(force.rms_error_pct.unwrap() < 5.0, "{force:?}");
     // Holding 250 N means feeding slower than the uncontrolled 300 mm/min.
     assert!(held.cycle_time > free.cycle_time);
+}
+
+/// What a servo on a virtual clock asks before it stops the clock: does
+/// the queued motion wait on the operator alone? A `step` that arrived
+/// before the program's segments (the planner is still starting) is a
+/// request the executor has not acted on yet: the motion does not wait,
+/// and a clock stopped there would never start again. Once the stepped
+/// line has run, it does wait, until the next `step`.
+#[test]
+fn a_step_sent_before_the_motion_arrives_is_not_waiting_on_the_operator() {
+    let machine = identified_mill("");
+    let kins = machine.kinematics.clone();
+    let (mut producer, mut commands, mut tick) = servo_on(&machine, 64);
+    tick.configure(&machine.description);
+    for cmd in [
+        ServoCommand::Enable(true),
+        ServoCommand::SingleBlock(true),
+        ServoCommand::Step,
+    ] {
+        commands.push(cmd).unwrap();
+    }
+    // The commands, then an idle servo's settling ticks, with nothing queued.
+    for _ in 0..300 {
+        tick.tick();
+    }
+    let canon = program("G21 G90\nG1 X5 F3000\nG1 X10\nM2\n");
+    let segments = plan_program(canon, &*kins, Position::ZERO, PlannerConfig::default(), 1);
+    for seg in segments.unwrap() {
+        producer.push(seg).unwrap();
+    }
+    assert!(
+        !tick.waiting_on_operator(),
+        "the step asked for line 2 to run"
+    );
+    let mut ticks = 0;
+    while !tick.waiting_on_operator() && ticks < 5000 {
+        tick.tick();
+        ticks += 1;
+    }
+    let snap = *tick.snapshot();
+    assert!(!snap.moving, "waits at rest, after {ticks} ticks");
+    assert_eq!(snap.commanded.x, 5.0, "at the end of the stepped line");
 }

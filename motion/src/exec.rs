@@ -682,6 +682,12 @@ impl Executor {
         self.step_requested = true;
     }
 
+    /// A [`step`](Self::step) the motion has not started on yet (nothing
+    /// was queued when it came, or the tool was still stopping).
+    pub fn step_pending(&self) -> bool {
+        self.step_requested
+    }
+
     /// Forget the queue position after the caller has dropped the queue
     /// (abort): the tool is at rest where it stopped.
     pub fn reset_queue(&mut self) {
