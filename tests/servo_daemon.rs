@@ -252,3 +252,36 @@ fn virtual_time_stands_still_while_the_operator_decides() {
     assert_eq!(axis(&end, "y"), 20.0);
     assert_eq!(end.program.unwrap().state, ProgramState::Finished);
 }
+
+/// Single-block stepping from idle on a virtual clock, through the daemon:
+/// each step runs one line and waits, with time standing still; `resume`
+/// finishes the program. (`step` reaches the servo before the planner's
+/// first segments; `tests/servo_control.rs` checks the servo on its own
+/// with the segments arriving only after its settling ticks, which the
+/// daemon here does not reliably reproduce.)
+#[test]
+fn stepping_from_idle_on_a_virtual_clock() {
+    let kerfd = Kerfd::start(&["--virtual-clock"]);
+    let mut client = kerfd.ready_client();
+    let program = kerfd.program("steps.ngc", "G21 G90\nG1 X10 F3000\nG1 Y10\nG1 X0\nM2\n");
+    client
+        .request(&Command::Open {
+            path: program.display().to_string(),
+        })
+        .unwrap();
+    let id = client.request(&Command::Step).unwrap()["program"]
+        .as_u64()
+        .unwrap() as u32;
+    let at =
+        |s: &Status, x: f64, y: f64| axis(s, "x") == x && axis(s, "y") == y && s.velocity == 0.0;
+    let first = follow(&mut client, |s| at(s, 10.0, 0.0));
+    assert_eq!(first.execution, Some(Execution::Stepping));
+    assert_time_stands_still(&mut client, &first, "after the first step");
+    client.request(&Command::Step).unwrap();
+    let second = follow(&mut client, |s| at(s, 10.0, 10.0));
+    assert_time_stands_still(&mut client, &second, "after the second step");
+    client.request(&Command::Resume).unwrap();
+    let end = follow_to_end(&mut client, id);
+    assert_eq!((axis(&end, "x"), axis(&end, "y")), (0.0, 10.0));
+    assert_eq!(end.program.unwrap().state, ProgramState::Finished);
+}
