@@ -262,6 +262,9 @@ pub struct ServoTick {
     head_outputs_done: bool,
     /// The M66 wait at the head of the queue, while it waits.
     input_wait: Option<kerf_io::pins::InputWait>,
+    /// The executor's last tick found the queued motion waiting on the
+    /// operator alone.
+    waits_on_operator: bool,
     /// Position loops of the joints (their output drives plants that take
     /// an effort; position drives ignore it).
     loops: JointLoops,
@@ -323,6 +326,7 @@ impl ServoTick {
             pins: PinBank::new(&kerf_io::PinConfig::default()),
             head_outputs_done: false,
             input_wait: None,
+            waits_on_operator: false,
             loops: JointLoops::new(&[LoopGains::SEED; MAX_JOINTS][..n], &joints[..n]),
             spindle_rpm: 0.0,
             force: None,
@@ -411,17 +415,12 @@ impl ServoTick {
         !self.commands.is_empty()
     }
 
-    /// True while queued motion waits on the operator alone: at a program
-    /// stop (M0, M1), or at rest under feed hold, between single blocks or
-    /// with a feed or rapid override at 0 %. An M66 wait does not count:
-    /// its timeout runs on servo time; nor does a `step` the executor has
-    /// not acted on yet (it came before the motion it runs).
+    /// True while queued motion waits on the operator alone, as of the
+    /// last tick ([`Sample::waits_on_operator`]).
+    ///
+    /// [`Sample::waits_on_operator`]: kerf_motion::Sample::waits_on_operator
     pub fn waiting_on_operator(&self) -> bool {
-        let snap = &self.snapshot;
-        let between_blocks = snap.single_block && !self.executor.step_pending();
-        let operator_zero =
-            snap.hold || between_blocks || snap.feed_override == 0.0 || snap.rapid_override == 0.0;
-        snap.at_program_stop || (!snap.moving && operator_zero && self.input_wait.is_none())
+        self.waits_on_operator
     }
 
     /// True once everything the executor needs ahead is queued: the queue
@@ -571,6 +570,7 @@ impl ServoTick {
         let active = self.enabled && self.snapshot.fault.is_none();
         // Set again where the executor runs.
         self.feeding = false;
+        self.waits_on_operator = false;
         if !active {
             self.discard_queue();
             let snap = &mut self.snapshot;
@@ -720,6 +720,7 @@ impl ServoTick {
             _ => self.input_wait = None,
         }
         let sample = self.executor.tick(self.period, head, tail);
+        self.waits_on_operator = sample.waits_on_operator;
         if sample.program_stop && !snap.at_program_stop {
             snap.program_stops += 1;
         }

@@ -45,6 +45,12 @@ pub struct Sample {
     /// True while the tool waits at a program stop (M0, M60, or M1 with
     /// the optional-stop switch on) for [`Executor::release_stop`].
     pub program_stop: bool,
+    /// True while the motion at the head of the queue waits for the
+    /// operator alone: at a program stop, or at rest before a move or
+    /// dwell that feed hold, single block (no `step` yet) or a 0 % feed
+    /// or rapid override keeps it from. Not at an M66, which ends by
+    /// itself (its input, or its timeout), nor with the queue empty.
+    pub waits_on_operator: bool,
 }
 
 /// Follows a queue of segments in time.
@@ -682,12 +688,6 @@ impl Executor {
         self.step_requested = true;
     }
 
-    /// A [`step`](Self::step) the motion has not started on yet (nothing
-    /// was queued when it came, or the tool was still stopping).
-    pub fn step_pending(&self) -> bool {
-        self.step_requested
-    }
-
     /// Forget the queue position after the caller has dropped the queue
     /// (abort): the tool is at rest where it stopped.
     pub fn reset_queue(&mut self) {
@@ -1067,6 +1067,10 @@ impl Executor {
             self.position = seg.position_at(self.s);
         }
         self.at_stop = program_stop;
+        let waits_on_operator = program_stop
+            || (!moving
+                && q.get(consumed)
+                    .is_some_and(|seg| self.held_by_operator(seg)));
         Sample {
             position: self.position,
             line: self.line,
@@ -1076,6 +1080,23 @@ impl Executor {
             consumed,
             stopped_at,
             program_stop,
+            waits_on_operator,
+        }
+    }
+
+    /// Whether the operator's settings alone keep the motion from entering
+    /// `seg`: feed hold, single block before a `step` for its line, or a
+    /// 0 % override of its kind.
+    fn held_by_operator(&self, seg: &Segment) -> bool {
+        let blocked = self.hold || (self.single_block && self.block_line != Some(seg.line));
+        match seg.kind {
+            SegmentKind::Feed => blocked || self.feed_override == 0.0,
+            SegmentKind::Rapid => blocked || self.rapid_override == 0.0,
+            SegmentKind::Dwell { .. } => blocked,
+            SegmentKind::Stop { .. }
+            | SegmentKind::Output(_)
+            | SegmentKind::WaitInput(_)
+            | SegmentKind::ProgramStop { .. } => false,
         }
     }
 
@@ -2481,6 +2502,113 @@ mod simulation {
         assert_eq!(out.last().unwrap().position.x, 30.0);
         assert_eq!(steps, 3, "one step per line");
         assert!(out.len() > 2000);
+    }
+
+    /// What a virtual clock may stop for: the sample says the motion waits
+    /// on the operator only at rest before something the operator's
+    /// settings hold back (hold, single block before its step, a 0 %
+    /// override of the move's kind, a dwell under hold), never while it
+    /// moves, dwells or waits for an M66, nor with the queue empty.
+    #[test]
+    fn samples_say_when_the_motion_waits_on_the_operator() {
+        let text = "G1 X10 F3000\nG0 X20\nG4 P0.2\nG1 X30\nM2\n";
+        let mut q = planned(text, PathMode::ExactPath);
+        let mut ex = Executor::new(Position::ZERO);
+        let tick = |ex: &mut Executor, q: &mut VecDeque<Segment>| {
+            let (a, b) = q.as_slices();
+            let s = ex.tick(PERIOD, a, b);
+            q.drain(..s.consumed);
+            s
+        };
+        // 0 % feed override: the feed at the head waits, from the start.
+        ex.set_feed_override(0.0);
+        let s = tick(&mut ex, &mut q);
+        assert!(!s.moving && s.waits_on_operator);
+        // Back to 100 %: it moves; then hold brakes it to rest.
+        ex.set_feed_override(1.0);
+        for _ in 0..100 {
+            assert!(!tick(&mut ex, &mut q).waits_on_operator);
+        }
+        ex.set_hold(true);
+        let mut braking = 0;
+        let rest = loop {
+            let s = tick(&mut ex, &mut q);
+            if !s.moving {
+                break s;
+            }
+            assert!(!s.waits_on_operator, "while braking");
+            braking += 1;
+        };
+        assert!(braking > 0 && rest.waits_on_operator);
+        ex.set_hold(false);
+        // The rapid moves at 0 % feed override; at 0 % rapid it stops and
+        // waits.
+        while q.front().is_some_and(|s| s.kind == SegmentKind::Feed) {
+            tick(&mut ex, &mut q);
+        }
+        ex.set_feed_override(0.0);
+        let s = tick(&mut ex, &mut q);
+        assert!(s.moving && !s.waits_on_operator, "the rapid runs");
+        ex.set_rapid_override(0.0);
+        while tick(&mut ex, &mut q).moving {}
+        assert!(tick(&mut ex, &mut q).waits_on_operator, "0 % rapid");
+        ex.set_feed_override(1.0);
+        ex.set_rapid_override(1.0);
+        // Run to the dwell, then hold: the dwell waits under hold.
+        while !q
+            .front()
+            .is_some_and(|s| matches!(s.kind, SegmentKind::Dwell { .. }))
+        {
+            tick(&mut ex, &mut q);
+        }
+        ex.set_hold(true);
+        assert!(tick(&mut ex, &mut q).waits_on_operator, "dwell under hold");
+        ex.set_hold(false);
+        let s = tick(&mut ex, &mut q);
+        assert!(s.moving && !s.waits_on_operator, "the dwell runs");
+        // Single block switched on in the dwell: it waits for a step; the
+        // step finishes the dwell's line, and the next line waits for its
+        // own step.
+        ex.set_single_block(true);
+        assert!(tick(&mut ex, &mut q).waits_on_operator, "dwell, no step");
+        ex.step();
+        assert!(!tick(&mut ex, &mut q).waits_on_operator, "the dwell's step");
+        let s = loop {
+            let s = tick(&mut ex, &mut q);
+            if !q
+                .front()
+                .is_some_and(|s| matches!(s.kind, SegmentKind::Dwell { .. }))
+            {
+                break s;
+            }
+            assert!(!s.waits_on_operator, "dwelling");
+        };
+        assert!(!s.moving && s.waits_on_operator, "the next line, no step");
+        ex.step();
+        assert!(!tick(&mut ex, &mut q).waits_on_operator, "its step");
+        ex.set_single_block(false);
+        // An M66 at the head under hold ends by itself: not the operator's.
+        let wait = Segment::marker(
+            SegmentKind::WaitInput(crate::plan::InputRequest {
+                index: 0,
+                digital: true,
+                mode: 3,
+                timeout: 1.0,
+            }),
+            9,
+            ex.position(),
+        );
+        let mut m66 = VecDeque::from([wait]);
+        ex.set_hold(true);
+        while tick(&mut ex, &mut q).moving {}
+        let s = tick(&mut ex, &mut m66);
+        assert!(
+            !s.moving && !s.waits_on_operator,
+            "an M66 waits for its input"
+        );
+        // Nothing queued: nothing to wait for.
+        let s = tick(&mut ex, &mut VecDeque::new());
+        assert!(!s.waits_on_operator);
     }
 
     /// M0 and M1 (with the optional-stop switch on) bring the tool to rest
