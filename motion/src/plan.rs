@@ -1328,12 +1328,7 @@ impl<'k> Planner<'k> {
                 }
             }
             CanonCmd::Dwell { seconds } => {
-                self.finish();
-                self.ready.push_back(Segment::marker(
-                    SegmentKind::Dwell { seconds: *seconds },
-                    line,
-                    self.position,
-                ));
+                self.marker_at_rest(line, SegmentKind::Dwell { seconds: *seconds })
             }
             CanonCmd::StraightTraverse { end } => self.line(canon, SegmentKind::Rapid, *end)?,
             CanonCmd::StraightFeed { end } => self.line(canon, SegmentKind::Feed, *end)?,
@@ -1358,8 +1353,12 @@ impl<'k> Planner<'k> {
             // shuttle, and M60's program stop follows it).
             CanonCmd::ProgramEnd | CanonCmd::Finish | CanonCmd::PalletShuttle => self.finish(),
             // And at a program stop, where it waits for the operator.
-            CanonCmd::ProgramStop => self.stop_marker(line, false),
-            CanonCmd::OptionalProgramStop => self.stop_marker(line, true),
+            CanonCmd::ProgramStop => {
+                self.marker_at_rest(line, SegmentKind::ProgramStop { optional: false })
+            }
+            CanonCmd::OptionalProgramStop => {
+                self.marker_at_rest(line, SegmentKind::ProgramStop { optional: true })
+            }
             CanonCmd::StraightProbe { .. } => return unsupported("a probe move (G38.x)"),
             CanonCmd::RigidTap { .. } => return unsupported("rigid tapping (G33.1, G84 rigid)"),
             CanonCmd::StartSpeedFeedSync { .. } => {
@@ -1387,17 +1386,13 @@ impl<'k> Planner<'k> {
                         ))
                     }
                 };
-                self.finish();
-                self.ready.push_back(Segment::marker(
-                    SegmentKind::WaitInput(InputRequest {
-                        index,
-                        digital: *digital,
-                        mode: *mode,
-                        timeout: *timeout,
-                    }),
-                    line,
-                    self.position,
-                ));
+                let request = InputRequest {
+                    index,
+                    digital: *digital,
+                    mode: *mode,
+                    timeout: *timeout,
+                };
+                self.marker_at_rest(line, SegmentKind::WaitInput(request));
             }
             CanonCmd::SetMotionOutputBit { index } => {
                 let n = self.digital_output(canon, *index)?;
@@ -1414,7 +1409,8 @@ impl<'k> Planner<'k> {
             CanonCmd::SetAuxOutputBit { index } | CanonCmd::ClearAuxOutputBit { index } => {
                 let n = self.digital_output(canon, *index)?;
                 let on = matches!(canon.cmd, CanonCmd::SetAuxOutputBit { .. });
-                self.output_marker(line, OutputChange::Digital { index: n as u8, on });
+                let change = OutputChange::Digital { index: n as u8, on };
+                self.marker_at_rest(line, SegmentKind::Output(change));
             }
             CanonCmd::SetAuxOutputValue { index, value } => {
                 let n = self.analog_output(canon, *index)?;
@@ -1422,7 +1418,7 @@ impl<'k> Planner<'k> {
                     index: n as u8,
                     value: *value,
                 };
-                self.output_marker(line, change);
+                self.marker_at_rest(line, SegmentKind::Output(change));
             }
             // Offsets and modes the interpreter has already applied to every
             // position, and commands for other parts of the machine.
@@ -1495,24 +1491,12 @@ impl<'k> Planner<'k> {
         }
     }
 
-    /// A program stop: everything before it runs to rest first.
-    fn stop_marker(&mut self, line: u32, optional: bool) {
+    /// A marker that acts at rest (a dwell, an M66 wait, a program stop,
+    /// an immediate output): everything before it runs to rest first.
+    fn marker_at_rest(&mut self, line: u32, kind: SegmentKind) {
         self.finish();
-        self.ready.push_back(Segment::marker(
-            SegmentKind::ProgramStop { optional },
-            line,
-            self.position,
-        ));
-    }
-
-    /// An immediate output: everything before it runs to rest first.
-    fn output_marker(&mut self, line: u32, change: OutputChange) {
-        self.finish();
-        self.ready.push_back(Segment::marker(
-            SegmentKind::Output(change),
-            line,
-            self.position,
-        ));
+        self.ready
+            .push_back(Segment::marker(kind, line, self.position));
     }
 
     /// Hand the waiting M62/M63/M67 changes to the move about to be queued.
