@@ -893,13 +893,11 @@ async fn handle(
         Command::Run { path, line } => run(shared, path, line, false).await,
         Command::Pause => operator(shared, Control::pause, &[ServoCommand::Hold(true)]),
         Command::Resume => {
+            // Control stays locked until the servo has its commands, so no
+            // other client's command comes between.
             let mut control = shared.observe();
             let stop = control.resume()?;
-            shared.send(ServoCommand::SingleBlock(false))?;
-            shared.send(ServoCommand::Hold(false))?;
-            if let Some(reached) = stop {
-                shared.send(ServoCommand::ReleaseStop { reached })?;
-            }
+            go_on(shared, false, stop)?;
             Ok(json!({}))
         }
         Command::Step => {
@@ -909,11 +907,7 @@ async fn handle(
                     false
                 } else {
                     let stop = control.step()?;
-                    shared.send(ServoCommand::SingleBlock(true))?;
-                    shared.send(ServoCommand::Hold(false))?;
-                    if let Some(reached) = stop {
-                        shared.send(ServoCommand::ReleaseStop { reached })?;
-                    }
+                    go_on(shared, true, stop)?;
                     shared.send(ServoCommand::Step)?;
                     true
                 }
@@ -1044,6 +1038,18 @@ async fn handle(
 /// An operator command that only changes state: apply `change` to the
 /// state machine and, if it allows it, send `commands` to the servo (under
 /// the same lock, so commands reach the servo in the order of the changes).
+/// Tell the servo to go on after `resume` or `step`: single block on or
+/// off, feed hold off, and the program stop the tool waits at (if any, by
+/// its number) released.
+fn go_on(shared: &Shared, single_block: bool, stop: Option<u64>) -> Result<(), Refusal> {
+    shared.send(ServoCommand::SingleBlock(single_block))?;
+    shared.send(ServoCommand::Hold(false))?;
+    if let Some(reached) = stop {
+        shared.send(ServoCommand::ReleaseStop { reached })?;
+    }
+    Ok(())
+}
+
 fn operator(
     shared: &Shared,
     change: fn(&mut Control) -> Result<(), Refusal>,
