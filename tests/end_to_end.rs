@@ -235,25 +235,38 @@ fn next_status(client: &mut Client) -> Status {
     }
 }
 
+/// Events until a status satisfies `pred`: the statuses seen, and the
+/// reasons given by the state events among them.
+fn events_until(c: &mut Client, pred: impl Fn(&Status) -> bool) -> (Vec<Status>, Vec<String>) {
+    let (mut statuses, mut reasons) = (Vec::new(), Vec::new());
+    loop {
+        match c.next_event().unwrap() {
+            Event::Status { status } => {
+                let done = pred(&status);
+                statuses.push(status);
+                if done {
+                    return (statuses, reasons);
+                }
+                assert!(
+                    statuses.len() < MAX_STATUSES,
+                    "no status satisfied the condition in {MAX_STATUSES} events; the last: {:?}",
+                    statuses.last()
+                );
+            }
+            Event::State {
+                reason: Some(r), ..
+            } => reasons.push(r),
+            _ => {}
+        }
+    }
+}
+
 /// Status events until `pred` holds; returns every status seen, the last
 /// one satisfying `pred`. Fails, showing the last status, if `pred` still
 /// does not hold after [`MAX_STATUSES`]: a machine that never gets there
 /// is a failure to read, not a test that runs forever.
 fn statuses_until(client: &mut Client, pred: impl Fn(&Status) -> bool) -> Vec<Status> {
-    let mut seen = Vec::new();
-    loop {
-        let s = next_status(client);
-        let done = pred(&s);
-        seen.push(s);
-        if done {
-            return seen;
-        }
-        assert!(
-            seen.len() < MAX_STATUSES,
-            "no status satisfied the condition in {MAX_STATUSES} events; the last: {:?}",
-            seen.last()
-        );
-    }
+    events_until(client, pred).0
 }
 
 /// Status events a test waits through at most: 5 minutes at 200 Hz, the
@@ -413,28 +426,6 @@ fn pause_and_resume_mid_move_keep_the_position_continuous() {
         .find(|s| axis(s, "x") > x_paused)
         .unwrap();
     assert!(axis(resumed, "x") > x_paused);
-}
-
-/// Events until a status satisfies `pred`: the statuses seen, and the
-/// reasons given by the state events among them.
-fn events_until(c: &mut Client, pred: impl Fn(&Status) -> bool) -> (Vec<Status>, Vec<String>) {
-    let (mut statuses, mut reasons) = (Vec::new(), Vec::new());
-    loop {
-        match c.next_event().unwrap() {
-            Event::Status { status } => {
-                let done = pred(&status);
-                statuses.push(status);
-                if done {
-                    return (statuses, reasons);
-                }
-                assert!(statuses.len() < MAX_STATUSES, "{:?}", statuses.last());
-            }
-            Event::State {
-                reason: Some(r), ..
-            } => reasons.push(r),
-            _ => {}
-        }
-    }
 }
 
 /// M0 and M1 stop the program at rest where they are and wait, whatever

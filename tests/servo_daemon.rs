@@ -7,13 +7,9 @@ mod support;
 use kerf::client::{Client, ClientError};
 use kerf::protocol::{Command, ErrorCode, Event, Execution, ProgramState, Status};
 use kerf_io::sim::cutting::CuttingConfig;
-use support::{axis, Kerfd};
+use support::{axis, status, Kerfd};
 
 const ALUMINIUM: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/aluminium-step.toml");
-
-fn status(client: &mut Client) -> Status {
-    serde_json::from_value(client.request(&Command::Status).unwrap()).unwrap()
-}
 
 /// Follow status events until `done` says so.
 fn follow(client: &mut Client, mut done: impl FnMut(&Status) -> bool) -> Status {
