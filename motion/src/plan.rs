@@ -266,23 +266,49 @@ struct Chosen {
     blend: (Blend, BlendExtremes),
     /// X Y Z of the point, unit tangent and curvature it ends with on the
     /// second move (the start of the next blend if that takes the rest).
-    end: [[f64; 3]; 3],
+    end: FrameXyz,
 }
 
 impl Chosen {
-    /// The blend with control points `control`, sampled unless `sampled`
-    /// already is (by the blend worker), ending with `end`.
-    fn new(
-        legs: (f64, f64),
-        control: &[Vec9; 6],
-        sampled: Option<&(Blend, BlendExtremes)>,
-        end: &Frame,
-    ) -> Chosen {
+    /// The blend with control points `control`, ending with `end`.
+    fn new(legs: (f64, f64), control: &[Vec9; 6], end: &Frame) -> Chosen {
         Chosen {
             legs,
-            blend: sampled.copied().unwrap_or_else(|| Blend::sampled(*control)),
-            end: [&end.point, &end.tangent, &end.curvature].map(|v| [v[0], v[1], v[2]]),
+            blend: Blend::sampled(*control),
+            end: xyz_frame(end),
         }
+    }
+
+    /// The blend the worker sampled, ending with `end`.
+    fn worked(legs: (f64, f64), sampled: &(Blend, BlendExtremes), end: FrameXyz) -> Chosen {
+        Chosen {
+            legs,
+            blend: *sampled,
+            end,
+        }
+    }
+}
+
+/// X Y Z of a frame's point, unit tangent and curvature: all a blend
+/// needs of the frames it joins (blends move X Y Z only).
+type FrameXyz = [[f64; 3]; 3];
+
+/// The X Y Z part of `f`.
+fn xyz_frame(f: &Frame) -> FrameXyz {
+    [&f.point, &f.tangent, &f.curvature].map(|v| [v[0], v[1], v[2]])
+}
+
+/// The whole frame on the X Y Z line `p` whose X Y Z part is `xyz`: the
+/// other axes stand where the line holds them and do not turn (as
+/// [`fitted_frame`] makes them).
+fn frame_on(xyz: &FrameXyz, p: &Programmed) -> Frame {
+    let full = |v: &[f64; 3], rest: &[f64]| -> Vec9 {
+        std::array::from_fn(|i| if i < 3 { v[i] } else { rest[i - 3] })
+    };
+    Frame {
+        point: full(&xyz[0], &p.line.start[3..]),
+        tangent: full(&xyz[1], &[0.0; 6]),
+        curvature: full(&xyz[2], &[0.0; 6]),
     }
 }
 
@@ -299,7 +325,7 @@ struct Pending {
     /// Where the blend that took this move's start ended, when blends
     /// take the whole line: the point, tangent and curvature the next
     /// blend starts from (on a dense curve, from the fitted curve).
-    mid: [[f64; 3]; 3],
+    mid: FrameXyz,
 }
 
 /// A waiting move as programmed (one field, not two options: waiting
@@ -1683,7 +1709,7 @@ impl<'k> Planner<'k> {
             let index = self.released + 1;
             let window = ahead::window_end(index, index + (end - at) as u64);
             if let Some(fit) = ahead.fit(index, window) {
-                return fit;
+                return fit.map(|xyz| frame_on(&xyz, pb));
             }
         }
         fitted_frame(&self.chords, at, end, pb)
@@ -1723,7 +1749,8 @@ impl<'k> Planner<'k> {
             return None;
         };
         let (control, near) = blend_near(pa, pb, tolerance, legs, start, end);
-        (near && self.blend_in_reach(&control)).then_some(control)
+        (near && self.blend_in_reach(&control.map(|q| [q[0], q[1], q[2]]), &control[0][3..]))
+            .then_some(control)
     }
 
     /// Emit what the waiting moves decide. With `last`, everything goes and
@@ -1756,7 +1783,7 @@ impl<'k> Planner<'k> {
             }
             if !both_lines {
                 if let Some((legs, control, end)) = self.choose_arc_blend() {
-                    self.blend_corner(Chosen::new(legs, &control, None, &end));
+                    self.blend_corner(Chosen::new(legs, &control, &end));
                     continue;
                 }
             }
@@ -1838,18 +1865,21 @@ impl<'k> Planner<'k> {
     /// ([`hull_in_box`]). Otherwise the reach can be any shape, and the
     /// blend is sampled, as `check_shape` samples a move: at least 8
     /// points and one every 0.25 mm of its control polygon.
-    fn blend_in_reach(&self, q: &[Vec9; 6]) -> bool {
+    ///
+    /// `q` are the X Y Z control points, `rest` where the other six axes
+    /// stand along it.
+    fn blend_in_reach(&self, q: &[[f64; 3]; 6], rest: &[f64]) -> bool {
         if !self.sample_joints {
-            let points = q.map(|p| [p[0], p[1], p[2]]);
-            return hull_in_box(&points, &self.travel, SUBDIVISIONS + 2);
+            return hull_in_box(q, &self.travel, SUBDIVISIONS + 2);
         }
         let polygon: f64 = (0..5)
-            .map(|k| norm(&std::array::from_fn(|i| q[k + 1][i] - q[k][i])))
+            .map(|k| norm3(&std::array::from_fn(|i| q[k + 1][i] - q[k][i])))
             .sum();
         let n = ((polygon / 0.25).ceil() as usize).clamp(8, 64);
         let poly = Poly::new(q);
+        let mut p = [0.0; 9];
+        p[3..].copy_from_slice(rest);
         (1..n).all(|k| {
-            let mut p = q[0];
             p[..3].copy_from_slice(&poly.point(k as f64 / n as f64));
             self.kins.check_pose(&Position::from_array(p)).is_ok()
         })
@@ -1929,7 +1959,7 @@ impl<'k> Planner<'k> {
             let nothing = Proven::default();
             if limit > 0.0
                 && sampled_within(&control, &near, limit, 0.3 * scale, &nothing)
-                && self.blend_in_reach(&control)
+                && self.blend_in_reach(&control.map(|q| [q[0], q[1], q[2]]), &control[0][3..])
             {
                 return Some((legs, control, p1));
             }
@@ -1968,7 +1998,7 @@ impl<'k> Planner<'k> {
         let worked = (a_consumed == b_consumed)
             .then_some(self.ahead.as_ref())
             .flatten()
-            .and_then(|ahead| ahead.take(self.released + 1, &start, legs, legs_bc));
+            .and_then(|ahead| ahead.take(self.released + 1, &xyz_frame(&start), legs, legs_bc));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
             let c_start = on_line(c, legs_bc.1, false)?;
             // The fitted curve's frame at b's midpoint, else b's midpoint
@@ -1986,19 +2016,20 @@ impl<'k> Planner<'k> {
             let through = |mid: Frame| {
                 let bl = self.blend_within(a, b, legs, &start, &mid)?;
                 self.blend_within(b, c, legs_bc, &mid, &c_start)?;
-                Some(Chosen::new(legs, &bl, None, &mid))
+                Some(Chosen::new(legs, &bl, &mid))
             };
             let fitted = if let Some(Speculation {
-                worked: Worked::Dense { fit, ab, bc },
+                worked: Worked::Dense { fit, bc },
                 sampled,
                 ..
             }) = worked.as_deref()
             {
-                match (fit, ab, bc) {
-                    (Some(mid), Some(ab), Some(bc))
-                        if self.blend_in_reach(ab) && self.blend_in_reach(bc) =>
+                match (fit, bc, sampled) {
+                    (Some(mid), Some(bc), Some(ab))
+                        if self.blend_in_reach(&ab.0.control, &ab.0.rest)
+                            && self.blend_in_reach(bc, &ab.0.rest) =>
                     {
-                        Some(Chosen::new(legs, ab, sampled.as_ref(), mid))
+                        Some(Chosen::worked(legs, ab, *mid))
                     }
                     _ => None,
                 }
@@ -2019,15 +2050,15 @@ impl<'k> Planner<'k> {
             ..
         }) = worked.as_deref()
         {
-            match chosen {
+            match (chosen, sampled) {
                 // The first legs whose blend is within the tolerance, if
                 // in reach; else what comes after them is to be tried.
-                Some((legs, control)) if self.blend_in_reach(control) => {
-                    return Some(Chosen::new(*legs, control, sampled.as_ref(), &end(*legs)?));
+                (Some(legs), Some(s)) if self.blend_in_reach(&s.0.control, &s.0.rest) => {
+                    return Some(Chosen::worked(*legs, s, xyz_frame(&end(*legs)?)));
                 }
-                Some(_) => {}
+                (Some(_), _) => {}
                 // None of the legs gives a blend within the tolerance.
-                None => return None,
+                (None, _) => return None,
             }
         }
         let tries = if a_consumed { 1 } else { CORNER_TRIES };
@@ -2039,7 +2070,7 @@ impl<'k> Planner<'k> {
             };
             let to = end(legs)?;
             if let Some(control) = self.blend_within(a, b, legs, &from, &to) {
-                return Some(Chosen::new(legs, &control, None, &to));
+                return Some(Chosen::new(legs, &control, &to));
             }
         }
         None

@@ -29,7 +29,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::{
-    blend_legs, blend_near, corner_legs, fitted_frame, Chord, PathMode, Programmed, FIT_SIDE,
+    blend_legs, blend_near, corner_legs, fitted_frame, xyz_frame, Chord, FrameXyz, PathMode,
+    Programmed, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame, Vec9};
 
@@ -118,16 +119,23 @@ enum Input {
 /// The blend at the vertex between lines `a` and `b` (the move with the
 /// junction's index, `c` the one after) as the planner would work it out
 /// from `start` with these legs, but for the machine's reach.
+///
+/// X Y Z only, of frames and control points: the lines are X Y Z lines,
+/// so the other axes are the lines' own, and the planner has them. A
+/// speculation crosses from the worker's core to the planner's, and every
+/// byte of it costs there (with the two threads on distant cores of this
+/// VM, 1.7 kB more per speculation planned 11 % slower).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Speculation {
     /// Where the blend starts on `a`: `a`'s fitted midpoint on a dense
     /// curve (where the blend before it ended), else on the line.
-    start: Frame,
+    start: FrameXyz,
     /// Legs at a's end and b's start, and at b's end and c's start.
     legs: (f64, f64),
     legs_bc: Option<(f64, f64)>,
     pub worked: Worked,
-    /// The chosen blend sampled ([`Blend::sampled`]), if there is one.
+    /// The chosen blend sampled ([`Blend::sampled`]), if there is one:
+    /// its control points are the blend's.
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
@@ -159,20 +167,16 @@ pub(super) enum Worked {
     /// On a dense curve (blends take the whole halves of a and b).
     Dense {
         /// The fitted frame at b's midpoint.
-        fit: Option<Frame>,
-        /// The blend from `start` to `fit`, if it is within b's
-        /// tolerance.
-        ab: Option<[Vec9; 6]>,
-        /// The blend from `fit` onto c, if `ab` is within tolerance and
-        /// this is too.
-        bc: Option<[Vec9; 6]>,
+        fit: Option<FrameXyz>,
+        /// The X Y Z control points of the blend from `fit` onto c, when
+        /// both it and the blend from `start` to `fit` (then `sampled`)
+        /// are within tolerance.
+        bc: Option<[[f64; 3]; 6]>,
     },
     /// At a corner (neither a's end nor b's start is a whole half): the
     /// first of the legs, shrinking by 0.7 from the tolerance's, whose
-    /// blend is within b's tolerance, with its control points.
-    Corner {
-        chosen: Option<((f64, f64), [Vec9; 6])>,
-    },
+    /// blend (then `sampled`) is within b's tolerance.
+    Corner { chosen: Option<(f64, f64)> },
 }
 
 /// One junction's place in the ring of worked-out blends.
@@ -185,7 +189,7 @@ struct Slot {
     /// of its second line, which the worker fitted anyway (the next
     /// junction's blend starts there), with the fit's window
     /// ([`window_end`]).
-    fit: Option<(u64, Option<Frame>)>,
+    fit: Option<(u64, Option<FrameXyz>)>,
 }
 
 /// Where the fit at the midpoint of move `index` stops looking, seeing
@@ -412,7 +416,7 @@ impl Ahead {
     pub(super) fn take(
         &self,
         index: u64,
-        start: &Frame,
+        start: &FrameXyz,
         legs: (f64, f64),
         legs_bc: Option<(f64, f64)>,
     ) -> Option<Taken<'_>> {
@@ -435,11 +439,7 @@ impl Ahead {
         // copying it out showed in profiles.
         let s = slot.speculation.as_ref()?;
         let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
-        let frame_same = |a: &Frame, b: &Frame| {
-            same(&a.point, &b.point)
-                && same(&a.tangent, &b.tangent)
-                && same(&a.curvature, &b.curvature)
-        };
+        let frame_same = |a: &FrameXyz, b: &FrameXyz| same(a.as_flattened(), b.as_flattened());
         let pair = |l: Option<(f64, f64)>| l.map(|(x, y)| [x, y]);
         let legs_same = same(&[s.legs.0, s.legs.1], &[legs.0, legs.1])
             && match (pair(s.legs_bc), pair(legs_bc)) {
@@ -460,7 +460,7 @@ impl Ahead {
     /// of a junction the planner keeps), if the worker has it from a fit
     /// whose window ends at `window` ([`window_end`]); `None`: fit it.
     /// Never waits.
-    pub(super) fn fit(&self, index: u64, window: u64) -> Option<Option<Frame>> {
+    pub(super) fn fit(&self, index: u64, window: u64) -> Option<Option<FrameXyz>> {
         if self.shared.takes(index) {
             return None;
         }
@@ -751,7 +751,7 @@ impl Worker {
                 if slot.index != j - 1 {
                     slot.index = j - 1;
                     slot.speculation = None;
-                    slot.fit = Some((window_end(j - 1, end), fit_a));
+                    slot.fit = Some((window_end(j - 1, end), fit_a.as_ref().map(xyz_frame)));
                 }
             }
             let Some(fit_a) = fit_a else {
@@ -790,42 +790,37 @@ impl Worker {
         // Worked out in its slot (locked meanwhile): a speculation is over
         // 1.5 kB, and copying one in showed in profiles.
         let s = slot.speculation.insert(Speculation {
-            start,
+            start: xyz_frame(&start),
             legs,
             legs_bc,
             worked: Worked::Corner { chosen: None },
             sampled: None,
         });
         if let Some((c, tol_c, legs_bc)) = dense {
-            s.worked = Worked::Dense {
-                fit: Self::fit(&mut self.last_fit, moves, chords, first, j, end),
-                ab: None,
-                bc: None,
-            };
-            let Worked::Dense { fit, ab, bc } = &mut s.worked else {
-                unreachable!("just set");
-            };
-            if let Some(mid) = fit {
-                let (control, near) = blend_near(a, b, tolerance, legs, &s.start, mid);
+            let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
+            let mut bc = None;
+            if let Some(mid) = &fit {
+                let (control, near) = blend_near(a, b, tolerance, legs, &start, mid);
                 if near {
-                    *ab = Some(control);
                     let c_start = c.frame_at(legs_bc.1, false);
                     let (control_bc, near) = blend_near(b, c, tol_c, legs_bc, mid, &c_start);
                     if near {
-                        *bc = Some(control_bc);
+                        bc = Some(control_bc.map(|q| [q[0], q[1], q[2]]));
                         s.sampled = Some(Blend::sampled(control));
                     }
                 }
             }
+            s.worked = Worked::Dense {
+                fit: fit.as_ref().map(xyz_frame),
+                bc,
+            };
         } else {
             // The planner's corner: the tolerance's legs, then shorter.
             for legs in corner_legs(legs) {
                 let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
                 let (control, near) = blend_near(a, b, tolerance, legs, &from, &to);
                 if near {
-                    s.worked = Worked::Corner {
-                        chosen: Some((legs, control)),
-                    };
+                    s.worked = Worked::Corner { chosen: Some(legs) };
                     s.sampled = Some(Blend::sampled(control));
                     break;
                 }
