@@ -22,6 +22,7 @@
 //! kinematics, which belong to the planner's thread); the planner does
 //! that for every blend it takes.
 
+use std::cell::{Cell, UnsafeCell};
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -85,6 +86,12 @@ impl<T> std::ops::Deref for Padded<T> {
     }
 }
 
+/// Junctions the planner moves on before it lets the worker reuse the
+/// slots behind it (`Shared::consumed`): the worker reads that only
+/// when it is about to pass it, which it never is, the planner holding
+/// back fewer moves than SLOTS.
+const CONSUMED_STEP: u64 = 16;
+
 /// Junctions kept worked out: more than the lead, so that the worker's
 /// results are not overwritten before the planner reaches them.
 const SLOTS: usize = 2 * LEAD;
@@ -139,23 +146,25 @@ pub(super) struct Speculation {
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
-/// A speculation [`Ahead::take`] found usable, still in its slot, which
-/// stays locked while the planner reads it. The worker has finished with
-/// that junction and works on later ones, whose slots are others (it is
-/// never SLOTS junctions ahead), so it does not wait for this one.
-/// Dropping it empties the slot.
-pub(super) struct Taken<'a>(MutexGuard<'a, Slot>);
+/// A speculation [`Ahead::take`] found usable, read in place in its
+/// slot. The worker has finished with that junction for good, and while
+/// this lives the planner does not tell it that the slot may be reused
+/// (`Shared::consumed`).
+pub(super) struct Taken<'a> {
+    speculation: &'a Speculation,
+    reading: &'a Cell<bool>,
+}
 
 impl std::ops::Deref for Taken<'_> {
     type Target = Speculation;
     fn deref(&self) -> &Speculation {
-        self.0.speculation.as_ref().expect("take checked it")
+        self.speculation
     }
 }
 
 impl Drop for Taken<'_> {
     fn drop(&mut self) {
-        self.0.speculation = None;
+        self.reading.set(false);
     }
 }
 
@@ -180,10 +189,24 @@ pub(super) enum Worked {
 }
 
 /// One junction's place in the ring of worked-out blends.
+///
+/// Written by the worker alone, once per junction, and read by the
+/// planner in place, without a lock: a lock's word would cross between
+/// the cores twice per junction, as would a slot the planner emptied.
+/// `index` says what `filled` holds, and orders it: the worker stores
+/// it (Release) after filling, the planner loads it (Acquire) before
+/// reading, and once it names a junction the worker never writes that
+/// slot again until the planner has let the slot go (`Shared::consumed`).
 struct Slot {
-    /// The junction it holds (`u64::MAX`: none yet).
-    index: u64,
-    /// Its blend, or `None` when the planner claimed it first.
+    /// The junction whose work `filled` holds (`u64::MAX`: none yet).
+    index: AtomicU64,
+    filled: UnsafeCell<Filled>,
+}
+
+/// What the worker left in a slot for one junction: a blend, or the fit
+/// at a junction the planner keeps, never both.
+struct Filled {
+    /// Its blend.
     speculation: Option<Speculation>,
     /// At a junction the planner keeps: the fitted frame at the midpoint
     /// of its second line, which the worker fitted anyway (the next
@@ -220,8 +243,12 @@ struct Shared {
     /// wake-up is not lost.)
     closed: AtomicBool,
     /// The next junction the worker looks at: it has passed every one
-    /// before.
+    /// before (a patient planner waits on it).
     passed: Padded<AtomicU64>,
+    /// The planner reads no slot of a junction before this one any more:
+    /// their slots are the worker's to fill again. Moved on in steps of
+    /// [`CONSUMED_STEP`], and only while the planner holds no [`Taken`].
+    consumed: Padded<AtomicU64>,
     /// The planner waits for the worker's blends and fits, so that every
     /// one the worker can make is taken (tests).
     patient: bool,
@@ -230,11 +257,21 @@ struct Shared {
     all: bool,
     /// Which of [`SHARES`] is in force. Planner and worker may read it
     /// either side of a change: a junction both think the other's is
-    /// worked out by the planner, and one both think theirs is claimed
-    /// by whoever comes first, so the plan stays the same.
+    /// worked out by the planner, and one both think theirs is taken
+    /// from the worker if it got there first; a slot is filled once, so
+    /// the worker never puts a fit where it left a blend. The plan stays
+    /// the same.
     share: Padded<AtomicUsize>,
-    slots: Box<[Mutex<Slot>]>,
+    slots: Box<[Slot]>,
 }
+
+// SAFETY: the slots' `filled` cells are shared by the protocol on `Slot`:
+// the worker writes a cell only for a junction j with j < consumed +
+// SLOTS (so the planner is done with the junction the slot held before)
+// and before it stores `index = j`; it writes each junction's cell once.
+// The planner reads a cell only after loading `index` equal to its
+// junction, and moves `consumed` past it only when done reading.
+unsafe impl Sync for Shared {}
 
 impl Shared {
     fn new(patient: bool, all: bool) -> Shared {
@@ -248,16 +285,17 @@ impl Shared {
             deciding: Padded(AtomicU64::new(0)),
             closed: AtomicBool::new(false),
             passed: Padded(AtomicU64::new(0)),
+            consumed: Padded(AtomicU64::new(0)),
             patient,
             all,
             share: Padded(AtomicUsize::new(FIRST_SHARE)),
             slots: (0..SLOTS)
-                .map(|_| {
-                    Mutex::new(Slot {
-                        index: u64::MAX,
+                .map(|_| Slot {
+                    index: AtomicU64::new(u64::MAX),
+                    filled: UnsafeCell::new(Filled {
                         speculation: None,
                         fit: None,
-                    })
+                    }),
                 })
                 .collect(),
         }
@@ -268,39 +306,54 @@ impl Shared {
         self.all || worker_takes(index, self.share.load(Ordering::Relaxed))
     }
 
-    fn slot_of(&self, index: u64) -> &Mutex<Slot> {
+    fn slot_of(&self, index: u64) -> &Slot {
         &self.slots[(index % SLOTS as u64) as usize]
     }
 
-    fn slot(&self, index: u64) -> MutexGuard<'_, Slot> {
-        // A panic while a slot was locked leaves it as it was or with a
-        // finished speculation: both are safe to go on with.
-        self.slot_of(index)
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    /// What the worker left for junction `index`, if it has (and so is
+    /// done with it). A patient planner (tests) first waits until the
+    /// worker has passed junction `filled_by`; it always gets there,
+    /// since the planner holds back LEAD moves, more than a batch, or has
+    /// flushed.
+    ///
+    /// The planner must not move `consumed` past `index` while it uses
+    /// the answer.
+    fn filled(&self, index: u64, filled_by: u64) -> Option<&Filled> {
+        if self.patient {
+            while self.passed.load(Ordering::Acquire) <= filled_by {
+                std::thread::yield_now();
+            }
+        }
+        let slot = self.slot_of(index);
+        if slot.index.load(Ordering::Acquire) != index {
+            return None;
+        }
+        // SAFETY: `index` names this junction, so the worker has filled
+        // the cell and will not write it again while `consumed` stays at
+        // or below `index` (see `Shared`).
+        Some(unsafe { &*slot.filled.get() })
     }
 
-    /// Slot `index` for the planner, `None` while the worker holds it:
-    /// working the blend or fit out costs about what waiting would,
-    /// without the sleep and the wake-up. A patient planner (tests) waits
-    /// instead, until the worker has filled the slot or passed junction
-    /// `filled_by`; it always gets there, since the planner holds back
-    /// LEAD moves, more than a batch, or has flushed.
-    fn planner_slot(&self, index: u64, filled_by: u64) -> Option<MutexGuard<'_, Slot>> {
-        if !self.patient {
-            return match self.slot_of(index).try_lock() {
-                Ok(slot) => Some(slot),
-                Err(std::sync::TryLockError::Poisoned(p)) => Some(p.into_inner()),
-                Err(std::sync::TryLockError::WouldBlock) => None,
-            };
+    /// Fill the slot of junction `index` (the worker), unless the planner
+    /// may still read what the slot holds now, or the worker already
+    /// filled it for this junction: `fill` gets the cell to write, and the
+    /// slot then names `index`. False if it could not.
+    fn fill(&self, index: u64, consumed: &mut u64, fill: impl FnOnce(&mut Filled)) -> bool {
+        if index >= *consumed + SLOTS as u64 {
+            *consumed = self.consumed.load(Ordering::Acquire);
+            if index >= *consumed + SLOTS as u64 {
+                return false;
+            }
         }
-        let mut slot = self.slot(index);
-        while slot.index != index && self.passed.load(Ordering::Acquire) <= filled_by {
-            drop(slot);
-            std::thread::yield_now();
-            slot = self.slot(index);
+        let slot = self.slot_of(index);
+        if slot.index.load(Ordering::Relaxed) == index {
+            return false;
         }
-        Some(slot)
+        // SAFETY: the slot holds a junction below `consumed`, which the
+        // planner reads no more, and only this thread writes cells.
+        fill(unsafe { &mut *slot.filled.get() });
+        slot.index.store(index, Ordering::Release);
+        true
     }
 
     fn is_closed(&self) -> bool {
@@ -321,6 +374,10 @@ pub(super) struct Ahead {
     batch: Vec<Input>,
     /// Moves handed over so far, batched or not.
     pushed: u64,
+    /// A [`Taken`] is out: `consumed` must stay where it is.
+    reading: Cell<bool>,
+    /// What the planner last stored in `Shared::consumed`.
+    consumed: Cell<u64>,
     /// What the planner looked for and took (tests only).
     #[cfg(test)]
     tally: std::cell::Cell<Tally>,
@@ -368,6 +425,8 @@ impl Ahead {
             worker: Some(worker),
             batch: Vec::with_capacity(BATCH + 1),
             pushed: 0,
+            reading: Cell::new(false),
+            consumed: Cell::new(0),
             #[cfg(test)]
             tally: Default::default(),
         })
@@ -408,11 +467,21 @@ impl Ahead {
         }
     }
 
+    /// The planner is at junction `index` (every junction it asks about
+    /// comes later): the slots of the junctions before may be filled
+    /// again, once it holds no [`Taken`], in steps of [`CONSUMED_STEP`].
+    fn consume(&self, index: u64) {
+        if !self.reading.get() && index >= self.consumed.get() + CONSUMED_STEP {
+            self.consumed.set(index);
+            self.shared.consumed.store(index, Ordering::Release);
+        }
+    }
+
     /// The worked-out blend at junction `index` (the index of its second
     /// line among all moves queued), if the worker has it and made it
-    /// from this `start` with these legs; otherwise the junction is
-    /// claimed, so the worker leaves it, and `None` says to work it out
-    /// (also when the worker is on it now: no waiting, unless patient).
+    /// from this `start` with these legs; otherwise `None` says to work
+    /// it out (also when the worker has not got there: no waiting, unless
+    /// patient). Held at most one at a time.
     pub(super) fn take(
         &self,
         index: u64,
@@ -420,7 +489,8 @@ impl Ahead {
         legs: (f64, f64),
         legs_bc: Option<(f64, f64)>,
     ) -> Option<Taken<'_>> {
-        if !self.shared.takes(index) {
+        self.consume(index);
+        if !self.shared.takes(index) || self.reading.get() {
             return None;
         }
         #[cfg(test)]
@@ -428,16 +498,9 @@ impl Ahead {
         if !self.shared.patient {
             self.shared.deciding.store(index, Ordering::Relaxed);
         }
-        let mut slot = self.shared.planner_slot(index, index)?;
-        if slot.index != index {
-            slot.index = index;
-            slot.speculation = None;
-            slot.fit = None;
-            return None;
-        }
-        // Checked and read in place: a speculation is over 1.5 kB, and
-        // copying it out showed in profiles.
-        let s = slot.speculation.as_ref()?;
+        // Checked and read in place: copying a speculation out showed in
+        // profiles.
+        let s = self.shared.filled(index, index)?.speculation.as_ref()?;
         let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
         let frame_same = |a: &FrameXyz, b: &FrameXyz| same(a.as_flattened(), b.as_flattened());
         let pair = |l: Option<(f64, f64)>| l.map(|(x, y)| [x, y]);
@@ -448,28 +511,31 @@ impl Ahead {
                 _ => false,
             };
         if !(legs_same && frame_same(&s.start, start)) {
-            slot.speculation = None;
             return None;
         }
         #[cfg(test)]
         self.count(|t| t.taken += 1);
-        Some(Taken(slot))
+        self.reading.set(true);
+        Some(Taken {
+            speculation: s,
+            reading: &self.reading,
+        })
     }
 
     /// The fitted frame at the midpoint of move `index` (the second line
     /// of a junction the planner keeps), if the worker has it from a fit
     /// whose window ends at `window` ([`window_end`]); `None`: fit it.
-    /// Never waits.
+    /// Never waits, unless patient.
     pub(super) fn fit(&self, index: u64, window: u64) -> Option<Option<FrameXyz>> {
+        self.consume(index);
         if self.shared.takes(index) {
             return None;
         }
         #[cfg(test)]
         self.count(|t| t.fit_looked += 1);
         // The worker hands it over at the next junction.
-        let slot = self.shared.planner_slot(index, index + 1)?;
-        match slot.fit {
-            Some((at, fit)) if slot.index == index && at == window => {
+        match self.shared.filled(index, index + 1)?.fit {
+            Some((at, fit)) if at == window => {
                 #[cfg(test)]
                 self.count(|t| t.fitted += 1);
                 Some(fit)
@@ -504,6 +570,8 @@ struct Worker {
     next: u64,
     /// The last move that is not a line.
     last_break: Option<u64>,
+    /// The planner's `consumed`, as last read.
+    consumed: u64,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
     /// The junction at which the share is next judged (`adapt`).
@@ -529,6 +597,7 @@ impl Worker {
             flushes: VecDeque::new(),
             next: 1,
             last_break: None,
+            consumed: 0,
             last_fit: None,
             judge_at: SHARE_PERIOD,
             late: 0,
@@ -684,7 +753,7 @@ impl Worker {
     }
 
     /// The fitted frame at move `index`'s midpoint, seeing moves before `end`.
-    /// (Fields one by one, so that a slot can stay locked meanwhile.)
+    /// (Fields one by one, so that a slot can be borrowed meanwhile.)
     fn fit(
         last_fit: &mut Option<(u64, Option<Frame>)>,
         moves: &VecDeque<Move>,
@@ -712,7 +781,8 @@ impl Worker {
     }
 
     /// Work out junction `j` (moves j − 1, j and j + 1), seeing moves
-    /// before `end`, into its slot, unless the planner has claimed it.
+    /// before `end`, into its slot (which the planner reads only if it
+    /// has not decided the junction already).
     fn junction(&mut self, j: u64, end: u64) {
         // By reference: a programmed line is over 200 bytes.
         let at = |k: u64| match &self.moves[(k - self.first) as usize] {
@@ -747,12 +817,11 @@ impl Worker {
             let fit_a = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end);
             if !self.shared.takes(j - 1) {
                 // Junction j − 1 is the planner's: it needs this fit too.
-                let mut slot = self.shared.slot(j - 1);
-                if slot.index != j - 1 {
-                    slot.index = j - 1;
-                    slot.speculation = None;
-                    slot.fit = Some((window_end(j - 1, end), fit_a.as_ref().map(xyz_frame)));
-                }
+                let fit = (window_end(j - 1, end), fit_a.as_ref().map(xyz_frame));
+                self.shared.fill(j - 1, &mut self.consumed, |filled| {
+                    filled.speculation = None;
+                    filled.fit = Some(fit);
+                });
             }
             let Some(fit_a) = fit_a else {
                 return;
@@ -780,52 +849,49 @@ impl Worker {
             }
             _ => None,
         };
-        let mut slot = self.shared.slot(j);
-        if slot.index == j {
-            // The planner got here first.
-            return;
-        }
-        slot.index = j;
-        slot.fit = None;
-        // Worked out in its slot (locked meanwhile): a speculation is over
-        // 1.5 kB, and copying one in showed in profiles.
-        let s = slot.speculation.insert(Speculation {
-            start: xyz_frame(&start),
-            legs,
-            legs_bc,
-            worked: Worked::Corner { chosen: None },
-            sampled: None,
-        });
-        if let Some((c, tol_c, legs_bc)) = dense {
-            let fit = Self::fit(&mut self.last_fit, moves, chords, first, j, end);
-            let mut bc = None;
-            if let Some(mid) = &fit {
-                let (control, near) = blend_near(a, b, tolerance, legs, &start, mid);
-                if near {
-                    let c_start = c.frame_at(legs_bc.1, false);
-                    let (control_bc, near) = blend_near(b, c, tol_c, legs_bc, mid, &c_start);
+        let last_fit = &mut self.last_fit;
+        // Worked out in its slot: copying a speculation in showed in
+        // profiles.
+        self.shared.fill(j, &mut self.consumed, |filled| {
+            filled.fit = None;
+            let s = filled.speculation.insert(Speculation {
+                start: xyz_frame(&start),
+                legs,
+                legs_bc,
+                worked: Worked::Corner { chosen: None },
+                sampled: None,
+            });
+            if let Some((c, tol_c, legs_bc)) = dense {
+                let fit = Self::fit(last_fit, moves, chords, first, j, end);
+                let mut bc = None;
+                if let Some(mid) = &fit {
+                    let (control, near) = blend_near(a, b, tolerance, legs, &start, mid);
                     if near {
-                        bc = Some(control_bc.map(|q| [q[0], q[1], q[2]]));
+                        let c_start = c.frame_at(legs_bc.1, false);
+                        let (control_bc, near) = blend_near(b, c, tol_c, legs_bc, mid, &c_start);
+                        if near {
+                            bc = Some(control_bc.map(|q| [q[0], q[1], q[2]]));
+                            s.sampled = Some(Blend::sampled(control));
+                        }
+                    }
+                }
+                s.worked = Worked::Dense {
+                    fit: fit.as_ref().map(xyz_frame),
+                    bc,
+                };
+            } else {
+                // The planner's corner: the tolerance's legs, then shorter.
+                for legs in corner_legs(legs) {
+                    let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
+                    let (control, near) = blend_near(a, b, tolerance, legs, &from, &to);
+                    if near {
+                        s.worked = Worked::Corner { chosen: Some(legs) };
                         s.sampled = Some(Blend::sampled(control));
+                        break;
                     }
                 }
             }
-            s.worked = Worked::Dense {
-                fit: fit.as_ref().map(xyz_frame),
-                bc,
-            };
-        } else {
-            // The planner's corner: the tolerance's legs, then shorter.
-            for legs in corner_legs(legs) {
-                let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
-                let (control, near) = blend_near(a, b, tolerance, legs, &from, &to);
-                if near {
-                    s.worked = Worked::Corner { chosen: Some(legs) };
-                    s.sampled = Some(Blend::sampled(control));
-                    break;
-                }
-            }
-        }
+        });
     }
 }
 
