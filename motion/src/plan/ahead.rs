@@ -898,7 +898,7 @@ impl Worker {
 #[cfg(test)]
 mod tests {
     use super::super::{Planner, PlannerConfig};
-    use super::{Ahead, Shared, Tally, Worker, FIRST_SHARE, SHARES};
+    use super::{Ahead, Shared, Tally, Worker, CONSUMED_STEP, FIRST_SHARE, SHARES, SLOTS};
     use crate::testkit::{uniform, xyz};
     use kerf_interp::{Interpreter, Position};
     use std::fmt::Write;
@@ -1015,6 +1015,65 @@ mod tests {
             }
         }
         t + "M2\n"
+    }
+
+    #[test]
+    fn a_slot_is_filled_once_and_only_when_the_planner_has_let_it_go() {
+        let shared = Shared::new(false, false);
+        let slots = SLOTS as u64;
+        // The worker's view of the planner's `consumed`.
+        let mut consumed = 0;
+        let fit_at = |window: u64| move |f: &mut super::Filled| f.fit = Some((window, None));
+        let fit_of = |index: u64| shared.filled(index, index).map(|f| f.fit.map(|(w, _)| w));
+
+        assert!(fit_of(5).is_none(), "nothing there yet");
+        assert!(shared.fill(5, &mut consumed, fit_at(7)));
+        assert_eq!(
+            fit_of(5),
+            Some(Some(7)),
+            "the planner reads what was filled"
+        );
+        assert!(
+            !shared.fill(5, &mut consumed, fit_at(8)),
+            "a junction's slot is filled once"
+        );
+        assert_eq!(fit_of(5), Some(Some(7)));
+        assert!(
+            fit_of(5 + slots).is_none(),
+            "the same slot, another junction"
+        );
+
+        // Junction 5 + SLOTS reuses junction 5's slot: not while the
+        // planner may still read junction 5.
+        assert!(!shared.fill(5 + slots, &mut consumed, fit_at(9)));
+        assert_eq!(fit_of(5), Some(Some(7)), "what the planner may read stays");
+        // The planner lets go of the junctions before 6, in steps.
+        let ahead = Ahead {
+            shared: std::sync::Arc::new(shared),
+            worker: None,
+            batch: Vec::new(),
+            pushed: 0,
+            reading: Default::default(),
+            consumed: Default::default(),
+            tally: Default::default(),
+        };
+        ahead.consume(CONSUMED_STEP - 1);
+        assert!(!ahead.shared.fill(5 + slots, &mut consumed, fit_at(9)));
+        // Not while it reads a speculation either.
+        ahead.reading.set(true);
+        ahead.consume(CONSUMED_STEP + 6);
+        assert!(!ahead.shared.fill(5 + slots, &mut consumed, fit_at(9)));
+        ahead.reading.set(false);
+        ahead.consume(CONSUMED_STEP + 6);
+        assert!(ahead.shared.fill(5 + slots, &mut consumed, fit_at(9)));
+        let fit_of = |index: u64| {
+            ahead
+                .shared
+                .filled(index, index)
+                .map(|f| f.fit.map(|(w, _)| w))
+        };
+        assert_eq!(fit_of(5 + slots), Some(Some(9)));
+        assert!(fit_of(5).is_none(), "junction 5 is gone");
     }
 
     #[test]
