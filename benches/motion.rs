@@ -215,7 +215,11 @@ fn passes(mut pass: impl FnMut() -> f64) -> (f64, f64, f64) {
 /// and the first less an interpreter-only pass (`less interp`, the
 /// planner's share of the pipeline, which also pays for the two sharing a
 /// core's caches).
-fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
+/// Planning throughput of `program`; `targeted`: judged against issue 5's
+/// target (stellabee1.ngc and the 1,000,000-segment program are; the
+/// 20,000-chord spiral, 20 ms of planning in which the blend worker
+/// starts and settles its share, is printed for comparison only).
+fn throughput(name: &str, program: &str, kins: &dyn Kinematics, targeted: bool) {
     let (interp, _, _) = passes(|| {
         let t0 = Instant::now();
         for c in Interpreter::from_text(program, name, Position::ZERO) {
@@ -245,14 +249,21 @@ fn throughput(name: &str, program: &str, kins: &dyn Kinematics) {
     // Segments out (a line a blend consumes gives none, a blended corner
     // two) and canon commands in (one per programmed move) both count.
     println!(
-        "{name:<28} {planned:>9} segments  interp+plan {:>9.0} seg/s  plan {:>9.0} seg/s ({:.0}-{:.0}) {:>9.0} canon/s  less interp {:>9.0} seg/s  ({moves} canon)  target {TARGET_THROUGHPUT:.0} seg/s (plan): {}",
+        "{name:<28} {planned:>9} segments  interp+plan {:>9.0} seg/s  plan {:>9.0} seg/s ({:.0}-{:.0}) {:>9.0} canon/s  less interp {:>9.0} seg/s  ({moves} canon)  {}",
         rate(total),
         rate(plan.0),
         rate(plan.2),
         rate(plan.1),
         moves as f64 / plan.0,
         rate(rest),
-        verdict(rate(plan.0) >= TARGET_THROUGHPUT),
+        if targeted {
+            format!(
+                "target {TARGET_THROUGHPUT:.0} seg/s (plan): {}",
+                verdict(rate(plan.0) >= TARGET_THROUGHPUT)
+            )
+        } else {
+            "no target (too short to judge)".to_string()
+        },
     );
 }
 
@@ -374,14 +385,14 @@ fn main() {
         "cross-core handoff {:.0} ns (the blend worker's throughput follows it: ~30 ns near, ~165 ns far on this VM)",
         handoff_ns()
     );
-    throughput("spiral 0.02 mm, 20k seg", &spiral(20_000), kins);
+    throughput("spiral 0.02 mm, 20k seg", &spiral(20_000), kins, false);
     let stellabee = stellabee();
     match &stellabee {
-        Some(text) => throughput("stellabee1.ngc (169k lines)", text, kins),
+        Some(text) => throughput("stellabee1.ngc (169k lines)", text, kins, true),
         None => println!("stellabee1.ngc: not found under ../shared/conformance; skipped"),
     }
     if !quick {
-        throughput("spiral 0.02 mm, 1M seg", &spiral(1_000_000), kins);
+        throughput("spiral 0.02 mm, 1M seg", &spiral(1_000_000), kins, true);
         println!("cross-core handoff {:.0} ns, after", handoff_ns());
     }
     println!();
