@@ -214,11 +214,10 @@ fn passes(mut pass: impl FnMut() -> f64) -> (f64, f64, f64) {
 /// (`plan`, what the planner itself does, with the range over the passes);
 /// and the first less an interpreter-only pass (`less interp`, the
 /// planner's share of the pipeline, which also pays for the two sharing a
-/// core's caches).
-/// Planning throughput of `program`; `targeted`: judged against issue 5's
-/// target (stellabee1.ngc and the 1,000,000-segment program are; the
-/// 20,000-chord spiral, 20 ms of planning in which the blend worker
-/// starts and settles its share, is printed for comparison only).
+/// core's caches). With `targeted`, the `plan` median is judged against
+/// issue 5's target (stellabee1.ngc and the 1,000,000-segment program
+/// are; the 20,000-chord spiral, 20 ms of planning in which the blend
+/// worker starts and settles its share, is printed for comparison only).
 fn throughput(name: &str, program: &str, kins: &dyn Kinematics, targeted: bool) {
     let (interp, _, _) = passes(|| {
         let t0 = Instant::now();

@@ -1035,9 +1035,6 @@ async fn handle(
     }
 }
 
-/// An operator command that only changes state: apply `change` to the
-/// state machine and, if it allows it, send `commands` to the servo (under
-/// the same lock, so commands reach the servo in the order of the changes).
 /// Tell the servo to go on after `resume` or `step`: single block on or
 /// off, feed hold off, and the program stop the tool waits at (if any, by
 /// its number) released.
@@ -1050,6 +1047,9 @@ fn go_on(shared: &Shared, single_block: bool, stop: Option<u64>) -> Result<(), R
     Ok(())
 }
 
+/// An operator command that only changes state: apply `change` to the
+/// state machine and, if it allows it, send `commands` to the servo (under
+/// the same lock, so commands reach the servo in the order of the changes).
 fn operator(
     shared: &Shared,
     change: fn(&mut Control) -> Result<(), Refusal>,

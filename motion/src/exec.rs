@@ -717,10 +717,7 @@ impl Executor {
         if self.caps == Caps::Machine {
             return machine_cap(seg);
         }
-        if self.hold {
-            return 0.0;
-        }
-        if self.single_block && self.block_line != Some(seg.line) {
+        if self.operator_blocks(seg) {
             return 0.0;
         }
         match seg.kind {
@@ -1040,7 +1037,7 @@ impl Executor {
                     break;
                 }
                 SegmentKind::Dwell { seconds } => {
-                    if self.hold || (self.single_block && self.block_line != Some(seg.line)) {
+                    if self.operator_blocks(seg) {
                         break;
                     }
                     self.line = seg.line;
@@ -1084,11 +1081,17 @@ impl Executor {
         }
     }
 
+    /// Whether feed hold, or single block before a `step` for its line,
+    /// keeps the motion out of `seg` (overrides aside).
+    fn operator_blocks(&self, seg: &Segment) -> bool {
+        self.hold || (self.single_block && self.block_line != Some(seg.line))
+    }
+
     /// Whether the operator's settings alone keep the motion from entering
     /// `seg`: feed hold, single block before a `step` for its line, or a
     /// 0 % override of its kind.
     fn held_by_operator(&self, seg: &Segment) -> bool {
-        let blocked = self.hold || (self.single_block && self.block_line != Some(seg.line));
+        let blocked = self.operator_blocks(seg);
         match seg.kind {
             SegmentKind::Feed => blocked || self.feed_override == 0.0,
             SegmentKind::Rapid => blocked || self.rapid_override == 0.0,

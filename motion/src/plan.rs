@@ -298,15 +298,15 @@ fn xyz_frame(f: &Frame) -> FrameXyz {
     [&f.point, &f.tangent, &f.curvature].map(|v| [v[0], v[1], v[2]])
 }
 
-/// The whole frame on the X Y Z line `p` whose X Y Z part is `xyz`: the
-/// other axes stand where the line holds them and do not turn (as
-/// [`fitted_frame`] makes them).
-fn frame_on(xyz: &FrameXyz, p: &Programmed) -> Frame {
+/// The whole frame whose X Y Z part is `xyz`, on an X Y Z line whose
+/// other six axes stand at `rest` and do not turn (as [`fitted_frame`]
+/// makes them).
+fn frame_on(xyz: &FrameXyz, rest: &[f64]) -> Frame {
     let full = |v: &[f64; 3], rest: &[f64]| -> Vec9 {
         std::array::from_fn(|i| if i < 3 { v[i] } else { rest[i - 3] })
     };
     Frame {
-        point: full(&xyz[0], &p.line.start[3..]),
+        point: full(&xyz[0], rest),
         tangent: full(&xyz[1], &[0.0; 6]),
         curvature: full(&xyz[2], &[0.0; 6]),
     }
@@ -359,15 +359,7 @@ impl Pending {
 
     /// [`mid`](Self::mid) as a frame (the other axes where the line is).
     fn mid_frame(&self) -> Frame {
-        let rest = self.segment.shape.start();
-        let full = |v: &[f64; 3], rest: &Vec9| -> Vec9 {
-            std::array::from_fn(|i| if i < 3 { v[i] } else { rest[i] })
-        };
-        Frame {
-            point: full(&self.mid[0], &rest),
-            tangent: full(&self.mid[1], &[0.0; 9]),
-            curvature: full(&self.mid[2], &[0.0; 9]),
-        }
+        frame_on(&self.mid, &self.segment.shape.start()[3..])
     }
 
     fn full_length(&self) -> f64 {
@@ -1709,7 +1701,7 @@ impl<'k> Planner<'k> {
             let index = self.released + 1;
             let window = ahead::window_end(index, index + (end - at) as u64);
             if let Some(fit) = ahead.fit(index, window) {
-                return fit.map(|xyz| frame_on(&xyz, pb));
+                return fit.map(|xyz| frame_on(&xyz, &pb.line.start[3..]));
             }
         }
         fitted_frame(&self.chords, at, end, pb)
@@ -1749,8 +1741,7 @@ impl<'k> Planner<'k> {
             return None;
         };
         let (control, near) = blend_near(pa, pb, tolerance, legs, start, end);
-        (near && self.blend_in_reach(&control.map(|q| [q[0], q[1], q[2]]), &control[0][3..]))
-            .then_some(control)
+        (near && self.control_in_reach(&control)).then_some(control)
     }
 
     /// Emit what the waiting moves decide. With `last`, everything goes and
@@ -1855,7 +1846,7 @@ impl<'k> Planner<'k> {
         self.emit(blend, f64::INFINITY);
     }
 
-    /// Whether the blend with control points `q` stays where the machine
+    /// Whether the blend with control points `control` stays where the machine
     /// can go. The programmed moves are checked (`check_shape`), but a
     /// blend leaves them by up to the tolerance, and at a corner next to
     /// the edge of the travel or of the reach that can be outside.
@@ -1865,9 +1856,12 @@ impl<'k> Planner<'k> {
     /// ([`hull_in_box`]). Otherwise the reach can be any shape, and the
     /// blend is sampled, as `check_shape` samples a move: at least 8
     /// points and one every 0.25 mm of its control polygon.
-    ///
-    /// `q` are the X Y Z control points, `rest` where the other six axes
-    /// stand along it.
+    fn control_in_reach(&self, control: &[Vec9; 6]) -> bool {
+        self.blend_in_reach(&control.map(|q| [q[0], q[1], q[2]]), &control[0][3..])
+    }
+
+    /// [`control_in_reach`](Self::control_in_reach) for X Y Z control
+    /// points `q`, the other six axes standing at `rest`.
     fn blend_in_reach(&self, q: &[[f64; 3]; 6], rest: &[f64]) -> bool {
         if !self.sample_joints {
             return hull_in_box(q, &self.travel, SUBDIVISIONS + 2);
@@ -1959,7 +1953,7 @@ impl<'k> Planner<'k> {
             let nothing = Proven::default();
             if limit > 0.0
                 && sampled_within(&control, &near, limit, 0.3 * scale, &nothing)
-                && self.blend_in_reach(&control.map(|q| [q[0], q[1], q[2]]), &control[0][3..])
+                && self.control_in_reach(&control)
             {
                 return Some((legs, control, p1));
             }

@@ -30,10 +30,10 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::{
-    blend_legs, blend_near, corner_legs, fitted_frame, xyz_frame, Chord, FrameXyz, PathMode,
-    Programmed, FIT_SIDE,
+    blend_legs, blend_near, corner_legs, fitted_frame, frame_on, xyz_frame, Chord, FrameXyz,
+    PathMode, Programmed, FIT_SIDE,
 };
-use crate::path::{Blend, BlendExtremes, Frame, Vec9};
+use crate::path::{Blend, BlendExtremes, Frame};
 
 /// How many more lines the planner holds back while the worker runs, so
 /// that the worker has them before the planner needs their blends.
@@ -826,14 +826,9 @@ impl Worker {
             let Some(fit_a) = fit_a else {
                 return;
             };
-            let xyz = |v: &Vec9, rest: &dyn Fn(usize) -> f64| -> Vec9 {
-                std::array::from_fn(|i| if i < 3 { v[i] } else { rest(i) })
-            };
-            Frame {
-                point: xyz(&fit_a.point, &|i| a.line.start[i] + half_a * a.direction[i]),
-                tangent: xyz(&fit_a.tangent, &|_| 0.0),
-                curvature: xyz(&fit_a.curvature, &|_| 0.0),
-            }
+            let rest: [f64; 6] =
+                std::array::from_fn(|i| a.line.start[i + 3] + half_a * a.direction[i + 3]);
+            frame_on(&xyz_frame(&fit_a), &rest)
         } else if !a_whole && !b_whole {
             a.frame_at(legs.0, true)
         } else {
