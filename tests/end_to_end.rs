@@ -18,8 +18,7 @@ fn run_cmd(path: &std::path::Path) -> Command {
 
 /// Run a program and follow status events until it is no longer running.
 fn run_to_end(client: &mut Client, path: &std::path::Path) -> Status {
-    let reply = client.request(&run_cmd(path)).unwrap();
-    let id = reply["program"].as_u64().unwrap() as u32;
+    let id = support::start_program(client, path);
     client.wait_job(id, 50.0, |_| {}).unwrap()
 }
 

@@ -43,12 +43,7 @@ fn kerfd_sets_the_pins_a_program_asks_for() {
         "pins.ngc",
         "G21 G90 G1 X10 F3000\nM62 P2\nM67 E1 Q3.5\nG1 X20\nM64 P0\nM68 E0 Q-2\nM65 P0\nM64 P3\nM2\n",
     );
-    let run = Command::Run {
-        path: Some(program.display().to_string()),
-        line: None,
-    };
-    let reply = client.request(&run).unwrap();
-    let id = reply["program"].as_u64().unwrap() as u32;
+    let id = support::start_program(&mut client, &program);
     let end = client.wait_job(id, 50.0, |_| {}).unwrap();
     let p = end.program.as_ref().unwrap();
     assert_eq!(p.state, ProgramState::Finished, "{:?}", p.error);

@@ -21,14 +21,7 @@ const RATE_HZ: f64 = 100.0;
 /// Run `program` to its end, watched by `c`; the servo figures before and after.
 fn run_and_measure(c: &mut Client, program: &std::path::Path) -> (ServoStatus, ServoStatus) {
     let before = c.status().unwrap().servo;
-    let id = c
-        .request(&Command::Run {
-            path: Some(program.display().to_string()),
-            line: None,
-        })
-        .unwrap()["program"]
-        .as_u64()
-        .unwrap() as u32;
+    let id = support::start_program(c, program);
     let end = c.wait_job(id, 20.0, |_| {}).unwrap();
     assert_eq!(end.program.unwrap().state, ProgramState::Finished);
     (before, end.servo)
@@ -125,16 +118,7 @@ fn a_hundred_subscribers_garbage_and_bad_clients_do_not_disturb_a_program() {
         }
     });
     // The program is started by a client that hangs up at once: it runs on.
-    let reply = {
-        let mut starter = kerfd.client();
-        starter
-            .request(&Command::Run {
-                path: Some(program.display().to_string()),
-                line: None,
-            })
-            .unwrap()
-    };
-    let id = reply["program"].as_u64().unwrap() as u32;
+    let id = support::start_program(&mut kerfd.client(), &program);
     let before = c.status().unwrap().servo;
     let end = c.wait_job(id, 20.0, |_| {}).unwrap();
     let p = end.program.as_ref().unwrap();
