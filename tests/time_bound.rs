@@ -255,32 +255,50 @@ fn planned_and_bound(program: &str, kins: &dyn Kinematics) -> (f64, f64) {
     (run.cycle_time, bound(program, kins, Position::ZERO).time)
 }
 
+/// Issue 5's time-optimality targets, planned cycle time over the bound:
+/// at most 1.05 on the circle of small segments, 1.10 on the zig-zag
+/// pocket (the benchmark's programs; `cargo bench --bench motion` prints
+/// the same ratios with stellabee1.ngc's, which misses its 1.10).
+const CIRCLE_TARGET: f64 = 1.05;
+const POCKET_TARGET: f64 = 1.10;
+
 #[test]
-fn the_bound_is_below_the_planned_cycle_time() {
+fn the_bound_is_below_the_planned_cycle_time_and_the_met_targets_hold() {
     let machine = mill3();
     let kins = &*machine.kinematics;
     let mut programs = vec![
-        ("circle", programs::circle_small_segments()),
-        ("zig-zag", programs::zigzag_pocket()),
-        ("spiral", programs::spiral(20_000)),
+        (
+            "circle",
+            programs::circle_small_segments(),
+            Some(CIRCLE_TARGET),
+        ),
+        ("zig-zag", programs::zigzag_pocket(), Some(POCKET_TARGET)),
+        ("spiral", programs::spiral(20_000), None),
     ];
     // The first 4000 lines of stellabee1.ngc (its G18 arcs and dense
     // lines; the whole file is a benchmark row, too slow for a debug test).
     match programs::stellabee() {
         Some(text) => {
             let head: Vec<&str> = text.lines().take(4000).collect();
-            programs.push(("stellabee", head.join("\n") + "\nM2\n"));
+            programs.push(("stellabee", head.join("\n") + "\nM2\n", None));
         }
         None => eprintln!("stellabee1.ngc not under ../shared; skipped"),
     }
-    for (name, text) in programs {
+    for (name, text, target) in programs {
         let (planned, bound) = planned_and_bound(&text, kins);
-        eprintln!("{name}: planned {planned:.3} s, bound {bound:.3} s");
+        let ratio = planned / bound;
+        eprintln!("{name}: planned {planned:.3} s, bound {bound:.3} s, ratio {ratio:.3}");
         assert!(bound.is_finite() && bound > 0.0, "{name}: bound {bound}");
         assert!(
             bound <= planned,
             "{name}: bound {bound} > planned {planned}"
         );
+        if let Some(target) = target {
+            assert!(
+                ratio <= target,
+                "{name}: planned {planned:.3} s is {ratio:.3} times the bound, over the target {target}"
+            );
+        }
     }
 }
 
