@@ -414,22 +414,28 @@ impl Ahead {
     }
 
     fn spawn(patient: bool, all: bool) -> Option<Ahead> {
-        let shared = Arc::new(Shared::new(patient, all));
-        let theirs = Arc::clone(&shared);
+        let mut ahead = Ahead::over(Arc::new(Shared::new(patient, all)));
+        let theirs = Arc::clone(&ahead.shared);
         let worker = std::thread::Builder::new()
             .name("kerf-blends".into())
             .spawn(move || Worker::new(theirs).run())
             .ok()?;
-        Some(Ahead {
+        ahead.worker = Some(worker);
+        Some(ahead)
+    }
+
+    /// The planner's end of `shared`, with no worker yet.
+    fn over(shared: Arc<Shared>) -> Ahead {
+        Ahead {
             shared,
-            worker: Some(worker),
+            worker: None,
             batch: Vec::with_capacity(BATCH + 1),
             pushed: 0,
             reading: Cell::new(false),
             consumed: Cell::new(0),
             #[cfg(test)]
             tally: Default::default(),
-        })
+        }
     }
 
     /// Count in the tally (tests only).
@@ -1043,15 +1049,7 @@ mod tests {
         assert!(!shared.fill(5 + slots, &mut consumed, fit_at(9)));
         assert_eq!(fit_of(5), Some(Some(7)), "what the planner may read stays");
         // The planner lets go of the junctions before 6, in steps.
-        let ahead = Ahead {
-            shared: std::sync::Arc::new(shared),
-            worker: None,
-            batch: Vec::new(),
-            pushed: 0,
-            reading: Default::default(),
-            consumed: Default::default(),
-            tally: Default::default(),
-        };
+        let ahead = Ahead::over(std::sync::Arc::new(shared));
         ahead.consume(CONSUMED_STEP - 1);
         assert!(!ahead.shared.fill(5 + slots, &mut consumed, fit_at(9)));
         // Not while it reads a speculation either.
