@@ -287,6 +287,10 @@ fn slower_ahead(q: View, k: usize, dist: f64, v: f64, a: f64, amax: f64, jmax: f
     false
 }
 
+/// Most of its target speed that tracking aims under it (see
+/// `Executor::advance`): slow feeds then run within 0.1 % of the feed.
+const AIM_SHARE: f64 = 1e-3;
+
 /// The acceleration to have at the end of this period so that easing it
 /// back to zero afterwards, in whole periods at jerk up to `jmax`, lands
 /// exactly on `target`; capped at ±`amax`.
@@ -1167,8 +1171,16 @@ impl Executor {
         // Aim J·dt²/8 low. The continuous tracking law overshot by up to
         // that much in a ramp's last period; the whole-period law does not,
         // but the caps-near aim below was sized with this slack, and the
-        // speed it would win back is about 1e-4 of the cruise.
-        let margin = if shaped { jmax * dt * dt / 8.0 } else { 0.0 };
+        // speed it would win back is about 1e-4 of the cruise. Never more
+        // than [`AIM_SHARE`] of the target, though: at a feed of a few
+        // mm/min the fixed slack is the whole feed, and aiming that low
+        // never starts the motion, nor closes the last micrometres to a
+        // stop.
+        let margin = if shaped {
+            (jmax * dt * dt / 8.0).min(AIM_SHARE * target)
+        } else {
+            0.0
+        };
         // A junction cap just ahead and only that much lower (the speed
         // limit of the next chord, a few µm/s under this one's) is too
         // close in speed for the look ahead to brake for in whole periods:
@@ -2460,6 +2472,43 @@ mod simulation {
         assert!(v <= 25.0 && v >= 25.0 - margin - 1e-9, "{v}");
         let peak = out.iter().map(|s| s.velocity).fold(0.0, f64::max);
         assert!(peak <= 75.0 && peak >= 75.0 - margin - 1e-9, "{peak}");
+    }
+
+    /// Feeds of a millimetre a minute and less (fine plunges, inverse-time
+    /// moves stretched over minutes) start from rest, cruise at the
+    /// programmed feed and end at the end of the line. Until 2026-11-26
+    /// tracking aimed a fixed J·dt²/8 (0.375 mm/min here) under the feed:
+    /// at or below that the motion never started, or came to rest a hair
+    /// short of the end and stayed there, and feeds a few times that ran
+    /// several per cent slow (10 mm/min at 3.7 % under).
+    #[test]
+    fn slow_feeds_start_from_rest_and_run_at_the_programmed_feed() {
+        for feed in [0.1, 0.3, 1.0, 10.0] {
+            let speed = feed / 60.0;
+            // About two seconds of cruise (as the program states it).
+            let length: f64 = format!("{:.9}", 2.0 * speed).parse().unwrap();
+            let text = format!("G1 X{length} F{feed}\nM2\n");
+            let mut q = planned(&text, PathMode::Blend { tolerance: 0.01 });
+            let out = run(&mut q, |_, _| {});
+            let last = out.last().unwrap();
+            assert!(
+                (last.position.x - length).abs() < 1e-12,
+                "F{feed}: ends at X{} of {length}",
+                last.position.x
+            );
+            let cruise = out.iter().map(|s| s.velocity).fold(0.0, f64::max);
+            assert!(
+                cruise <= speed * (1.0 + 1e-9) && cruise >= speed * (1.0 - 1e-3),
+                "F{feed}: cruises at {cruise} mm/s for {speed}"
+            );
+            let time = out.len() as f64 * PERIOD;
+            assert!(time < length / speed + 0.05, "F{feed}: {time} s");
+            let (v, a, j) = limit_use(&out);
+            assert!(
+                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
+                "F{feed}: limit use {v} {a} {j}"
+            );
+        }
     }
 
     #[test]
