@@ -83,6 +83,29 @@ fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
     assert_eq!(json["guard_takeovers"], 0);
 }
 
+/// The deviation is measured against the programmed moves up to the
+/// program's end, the last sample included. Until 2026-11-26 the end
+/// marker had no source line, and the last sample was measured against
+/// the moves of line 1 alone: a program starting with a rapid on line 1
+/// reported its distance from that rapid (here 10 mm), and one starting
+/// on a later line skipped the sample.
+#[test]
+fn plan_measures_the_deviation_at_the_end_against_the_last_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "end.ngc", "G0 X150 Y100 Z-10\nG1 X160 F600\nM2\n");
+    let out = kerf(&["plan", &p, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let deviation = json["max_deviation_mm"].as_f64().unwrap();
+    // The rapid's corner into the feed is blended within G64's default
+    // tolerance, 0.01 mm; the end is on the last move.
+    assert!(deviation <= 0.01 + 1e-9, "max deviation {deviation} mm");
+}
+
 #[test]
 fn plan_plot_writes_an_svg() {
     let dir = tempfile::tempdir().unwrap();

@@ -53,6 +53,22 @@ fn json_reports_following_and_contour_error_and_null_force_without_control() {
     assert!(plot.contains("Following error against time"), "plot");
 }
 
+/// The contour error at the end is measured against the program's last
+/// move: until 2026-11-26 the last sample was measured against line 1's
+/// moves alone, and a program starting with a rapid there reported its
+/// distance from that rapid (10 mm here).
+#[test]
+fn the_contour_error_at_the_end_is_measured_against_the_last_move() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("end.ngc");
+    std::fs::write(&p, "G0 X150 Y100 Z-10\nG1 X160 F600\nM2\n").unwrap();
+    let j = json(&kerf(&["sim", p.to_str().unwrap(), "--json"]));
+    // The corner blend stays within G64's default 0.01 mm; the servo
+    // with feedforward follows it to well under a micrometre more.
+    let contour = j["max_contour_error_mm"].as_f64().unwrap();
+    assert!(contour < 0.011, "max contour error {contour} mm");
+}
+
 #[test]
 fn json_reports_force_figures_with_control() {
     let out = kerf(&[

@@ -352,6 +352,8 @@ pub fn run(
     let mut ticks: u64 = 0;
     let mut program = program.into_iter();
     let mut program_done = false;
+    // The source line of the last command read.
+    let mut last_line = 0;
     // Keep the queue this deep so the executor's look ahead is not starved.
     const DEPTH: usize = 4096;
 
@@ -364,6 +366,7 @@ pub fn run(
                 }
                 Some(canon) => {
                     let canon = canon?;
+                    last_line = canon.source.line;
                     report.programmed.extend(programmed.push(&canon));
                     planner.plan(&canon)?;
                 }
@@ -373,9 +376,11 @@ pub fn run(
                 queue.push_back(seg);
             }
             if program_done {
+                // On the program's last line: the deviation at the end is
+                // measured against the moves up to it.
                 queue.push_back(Segment::marker(
                     SegmentKind::Stop { tag: 1 },
-                    0,
+                    last_line,
                     planner.position(),
                 ));
             }
