@@ -15,6 +15,19 @@ fn program(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
     path.display().to_string()
 }
 
+/// `kerf plan --json` of `text` on mill3: the report, once it succeeded.
+fn plan_json(text: &str) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "plan.ngc", text);
+    let out = kerf(&["plan", &p, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 #[test]
 fn check_lists_every_violation_with_its_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -59,15 +72,7 @@ fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
     let ramp_distance = v / 2.0 * ramp;
     let want = 2.0 * ramp + (len - 2.0 * ramp_distance) / v;
 
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(&dir, "one.ngc", "G1 X100 F6000\nM2\n");
-    let out = kerf(&["plan", &p, "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let json = plan_json("G1 X100 F6000\nM2\n");
     let got = json["cycle_time_s"].as_f64().unwrap();
     // Whole servo periods (1 ms) and the executor's J·dt²/8 speed margin
     // add at most 2 ms.
@@ -91,15 +96,7 @@ fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
 /// on a later line skipped the sample.
 #[test]
 fn plan_measures_the_deviation_at_the_end_against_the_last_move() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(&dir, "end.ngc", "G0 X150 Y100 Z-10\nG1 X160 F600\nM2\n");
-    let out = kerf(&["plan", &p, "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let json = plan_json("G0 X150 Y100 Z-10\nG1 X160 F600\nM2\n");
     let deviation = json["max_deviation_mm"].as_f64().unwrap();
     // The rapid's corner into the feed is blended within G64's default
     // tolerance, 0.01 mm; the end is on the last move.
@@ -229,11 +226,7 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
 
 /// `kerf plan --json` on mill3 measures limit use at most 1 + 1e-6.
 fn plans_within_limits(text: &str) {
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(&dir, "stretch.ngc", text);
-    let out = kerf(&["plan", &p, "--json"]);
-    assert!(out.status.success());
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let json = plan_json(text);
     let ratio = json["max_limit_ratio"].as_f64().unwrap();
     assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
 }
