@@ -224,6 +224,19 @@ fn a_steep_final_line_after_a_slow_blend_stops_within_limits() {
     );
 }
 
+/// Arcs whose end lies off their circle spiral to it, and the interpreter
+/// accepts up to 0.02 mm of difference however small the arc: here arcs of
+/// 0.01 mm spiral out to 0.03 mm. Their limits once took the start radius
+/// for the whole arc, and the motion ran at 1.13 times the jerk limit.
+#[test]
+fn spiral_arcs_stay_within_limits() {
+    let mut text = String::from("G21 G90 G64 P0.01\nG0 X150 Y100 Z-10\nG1 F3000\n");
+    for _ in 0..20 {
+        text += "G2 X150.02 Y100 I0.01 J0\nG3 X150 Y100 I0.01 J0\n";
+    }
+    plans_within_limits(&(text + "M2\n"));
+}
+
 /// `kerf plan --json` on mill3 measures limit use at most 1 + 1e-6.
 fn plans_within_limits(text: &str) {
     let json = plan_json(text);
