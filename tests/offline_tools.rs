@@ -103,6 +103,55 @@ fn plan_measures_the_deviation_at_the_end_against_the_last_move() {
     assert!(deviation <= 0.01 + 1e-9, "max deviation {deviation} mm");
 }
 
+/// `kerf check`, `plan` and `sim` read a program's tools from
+/// `--tool-table`, as `kerf canon` does; without it a program that loads
+/// a tool stops at its T word.
+#[test]
+fn check_plan_and_sim_take_a_tool_table() {
+    let dir = tempfile::tempdir().unwrap();
+    let tbl = program(&dir, "tools.tbl", "T1 P1 Z10 D6 ;10 mm long\n");
+    // Z-5 at the tool tip is Z5 of the spindle with a 10 mm tool: above
+    // mill3's travel (Z at most 0).
+    let p = program(
+        &dir,
+        "tool.ngc",
+        "G21 G90\nT1 M6\nG43 H1\nG0 X10 Y10 Z-20\nG1 Z-5 F600\nM2\n",
+    );
+    // What a failing `kerf` printed, both streams.
+    let refused = |args: &[&str]| {
+        let out = kerf(args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr)
+    };
+    let text = refused(&["check", &p]);
+    assert!(
+        text.contains("tool.ngc:2") && text.contains("tool 1"),
+        "{text}"
+    );
+    let text = refused(&["check", &p, "--tool-table", &tbl]);
+    assert!(
+        text.contains("tool.ngc:5") && text.contains("axis Z"),
+        "{text}"
+    );
+
+    // Within the travel, the offset is planned and simulated.
+    let inside = program(
+        &dir,
+        "inside.ngc",
+        "G21 G90\nT1 M6\nG43 H1\nG0 X10 Y10 Z-20\nG1 Z-15 F600\nM2\n",
+    );
+    for cmd in ["plan", "sim"] {
+        let out = kerf(&[cmd, &inside, "--tool-table", &tbl, "--json"]);
+        assert!(
+            out.status.success(),
+            "{cmd}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    let text = refused(&["plan", &inside, "--tool-table", "/nonexistent/tools.tbl"]);
+    assert!(text.contains("/nonexistent/tools.tbl"), "{text}");
+}
+
 #[test]
 fn plan_plot_writes_an_svg() {
     let dir = tempfile::tempdir().unwrap();

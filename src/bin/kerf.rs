@@ -153,6 +153,9 @@ enum Cmd {
         /// Machine: embedded name or TOML file.
         #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
         machine: String,
+        /// LinuxCNC tool table file (.tbl) for the program's T words.
+        #[arg(long, value_name = "FILE")]
+        tool_table: Option<PathBuf>,
     },
     /// Plan a program offline: cycle time, path deviation, limit use.
     Plan {
@@ -161,6 +164,9 @@ enum Cmd {
         /// Machine: embedded name or TOML file.
         #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
         machine: String,
+        /// LinuxCNC tool table file (.tbl) for the program's T words.
+        #[arg(long, value_name = "FILE")]
+        tool_table: Option<PathBuf>,
         /// Write an SVG plot of the path and of position, joints and feed
         /// against time.
         #[arg(long, value_name = "OUT.svg")]
@@ -181,6 +187,9 @@ enum Cmd {
         /// Machine: embedded name or TOML file.
         #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
         machine: String,
+        /// LinuxCNC tool table file (.tbl) for the program's T words.
+        #[arg(long, value_name = "FILE")]
+        tool_table: Option<PathBuf>,
         /// Write an SVG plot: the path, and following error, feed, force and
         /// override against time.
         #[arg(long, value_name = "OUT.svg")]
@@ -320,6 +329,7 @@ fn main() -> ExitCode {
         Cmd::Sim {
             file,
             machine,
+            tool_table,
             plot,
             no_feedforward,
             plant,
@@ -342,7 +352,14 @@ fn main() -> ExitCode {
                     force_target: force,
                     ..Default::default()
                 };
-                cli::sim::sim(&file, &machine, options, plot.as_deref(), json)
+                cli::sim::sim(
+                    &file,
+                    &machine,
+                    tool_table.as_deref(),
+                    options,
+                    plot.as_deref(),
+                    json,
+                )
             }
         }
         Cmd::Watch { rate } => cli::watch::watch(socket, rate, json),
@@ -441,18 +458,24 @@ fn main() -> ExitCode {
                 ini,
             },
         ),
-        Cmd::Check { file, machine } => cli::plan::check(&file, &machine, json),
+        Cmd::Check {
+            file,
+            machine,
+            tool_table,
+        } => cli::plan::check(&file, &machine, tool_table.as_deref(), json),
         Cmd::Plan {
             file,
             machine,
+            tool_table,
             plot,
             trapezoidal,
             segments,
         } => {
+            let tools = tool_table.as_deref();
             if segments {
-                cli::plan::segments(&file, &machine)
+                cli::plan::segments(&file, &machine, tools)
             } else {
-                cli::plan::plan(&file, &machine, plot.as_deref(), json, trapezoidal)
+                cli::plan::plan(&file, &machine, tools, plot.as_deref(), json, trapezoidal)
             }
         }
         Cmd::Kins {

@@ -3,32 +3,32 @@
 use std::io::Write;
 use std::path::Path;
 
-use kerf_interp::{Interpreter, Position};
 use kerf_motion::offline::{self, LimitUse, Report, RunConfig};
 use kerf_motion::{Planner, PlannerConfig};
 use serde_json::json;
 
-use super::Failure;
+use super::{open_program, Failure};
 use crate::svg::{Chart, Series};
 
 fn load(machine: &str) -> Result<kerf_machines::Machine, Failure> {
     kerf_machines::load(machine).map_err(|e| Failure::new(e.to_string()))
 }
 
-fn open(file: &Path, start: Position) -> Result<Interpreter<'static>, Failure> {
-    Interpreter::open(file, start).map_err(|e| Failure::new(format!("{}: {e}", file.display())))
-}
-
 /// `kerf check`: interpret the whole program and check every move against
 /// the machine's travel, reach and joint strokes. Lists every violation.
-pub fn check(file: &Path, machine: &str, json_out: bool) -> Result<(), Failure> {
+pub fn check(
+    file: &Path,
+    machine: &str,
+    tool_table: Option<&Path>,
+    json_out: bool,
+) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
     let home = machine.home();
     let mut planner = Planner::new(kins, home, PlannerConfig::default());
     let mut problems = Vec::new();
     let mut moves = 0usize;
-    for canon in open(file, home)? {
+    for canon in open_program(file, home, tool_table)? {
         match canon {
             Err(e) => {
                 problems.push(e.to_string());
@@ -69,7 +69,7 @@ pub fn check(file: &Path, machine: &str, json_out: bool) -> Result<(), Failure> 
 
 /// `kerf plan --segments`: list the planned segments with their limits,
 /// to see what holds a program back.
-pub fn segments(file: &Path, machine: &str) -> Result<(), Failure> {
+pub fn segments(file: &Path, machine: &str, tool_table: Option<&Path>) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
     let home = machine.home();
@@ -109,7 +109,7 @@ pub fn segments(file: &Path, machine: &str) -> Result<(), Failure> {
     if print(None).is_err() {
         return Ok(());
     }
-    for canon in open(file, home)? {
+    for canon in open_program(file, home, tool_table)? {
         let canon = canon.map_err(|e| Failure::new(e.to_string()))?;
         planner
             .plan(&canon)
@@ -134,6 +134,7 @@ pub fn segments(file: &Path, machine: &str) -> Result<(), Failure> {
 pub fn plan(
     file: &Path,
     machine: &str,
+    tool_table: Option<&Path>,
     plot: Option<&Path>,
     json_out: bool,
     trapezoidal: bool,
@@ -148,7 +149,7 @@ pub fn plan(
         record: if plot.is_some() { 2000 } else { 0 },
     };
     let home = machine.home();
-    let report = offline::run(open(file, home)?, kins, home, config)
+    let report = offline::run(open_program(file, home, tool_table)?, kins, home, config)
         .map_err(|e| Failure::new(e.to_string()))?;
     if let Some(out) = plot {
         let names: Vec<String> = kins.joints().iter().map(|j| j.name.clone()).collect();

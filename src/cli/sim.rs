@@ -5,10 +5,9 @@ use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
 
-use kerf_interp::Interpreter;
 use serde_json::{json, Value};
 
-use super::Failure;
+use super::{open_program, Failure};
 use crate::simulate::{self, SimOptions, SimReport};
 use crate::svg::{Chart, Series};
 
@@ -16,13 +15,13 @@ use crate::svg::{Chart, Series};
 pub fn sim(
     file: &Path,
     machine: &str,
+    tool_table: Option<&Path>,
     options: SimOptions,
     plot: Option<&Path>,
     json_out: bool,
 ) -> Result<(), Failure> {
     let machine = kerf_machines::load(machine).map_err(|e| Failure::new(e.to_string()))?;
-    let program = Interpreter::open(file, machine.home())
-        .map_err(|e| Failure::new(format!("{}: {e}", file.display())))?;
+    let program = open_program(file, machine.home(), tool_table)?;
     let options = SimOptions {
         record: plot.is_some(),
         ..options
