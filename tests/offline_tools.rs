@@ -88,6 +88,40 @@ fn plan_of_one_move_takes_the_jerk_limited_rest_to_rest_time() {
     assert_eq!(json["guard_takeovers"], 0);
 }
 
+/// `kerf plan --trapezoidal`: acceleration-limited profiles, for
+/// comparison. Until 2026-11-26 the motion never started in that mode
+/// (the executor's guard found no way to rest under an infinite jerk
+/// limit), so `kerf plan --trapezoidal` waited for ever.
+#[test]
+fn trapezoidal_plan_takes_the_trapezoid_time() {
+    // mill3 X: 1500 mm/s²; at F6000 (100 mm/s) over 100 mm the speed
+    // ramps for v/A each way and cruises the rest.
+    let (v, a, len) = (100.0f64, 1500.0f64, 100.0f64);
+    let want = 2.0 * v / a + (len - v * v / a) / v;
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "trap.ngc", "G1 X100 F6000\nM2\n");
+    let out = kerf(&["plan", &p, "--trapezoidal", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let got = json["cycle_time_s"].as_f64().unwrap();
+    // Within 0.6 %: whole periods at each end, cruising 0.1 % under the
+    // feed, and the stop's profile braking a little under the limit so as
+    // to arrive exactly (1.072 s against 1.0667 s).
+    assert!(
+        got >= want - 1e-9 && got <= want * 1.006,
+        "planned {got} s, trapezoid {want} s"
+    );
+    // Velocity and acceleration only: the jerk is not limited.
+    let ratio = json["max_limit_ratio"].as_f64().unwrap();
+    assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
+    let x = &json["axes"][0];
+    assert!(x["acceleration"].as_f64().unwrap() > 0.999, "{x}");
+}
+
 /// The deviation is measured against the programmed moves up to the
 /// program's end, the last sample included. Until 2026-11-26 the end
 /// marker had no source line, and the last sample was measured against

@@ -453,6 +453,10 @@ impl Programmed {
     }
 }
 
+/// In acceleration-limited (trapezoidal) planning, how many times a
+/// servo period the jerk limit lets the acceleration swing over its range.
+const TRAPEZOID_RAMPS: f64 = 16.0;
+
 /// How many corner blend legs are tried ([`corner_legs`]).
 const CORNER_TRIES: usize = 9;
 
@@ -1210,8 +1214,13 @@ impl<'k> Planner<'k> {
             }
         }
         if !config.jerk_limited {
+            // Acceleration-limited profiles: the acceleration may swing
+            // over its whole range within a sixteenth of a period, which
+            // sampled every period is a step. (Not an infinite jerk: the
+            // executor's profiles and guard take time to change the
+            // acceleration, and divide by the jerk.)
             for l in limits.iter_mut().flatten() {
-                l.max_jerk = f64::INFINITY;
+                l.max_jerk = TRAPEZOID_RAMPS * l.max_acceleration / config.period;
             }
         }
         Planner {
