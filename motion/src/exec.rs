@@ -91,6 +91,9 @@ pub struct Executor {
     /// Periods in which the search's choice had no guard and the motion
     /// followed the guard it had instead.
     takeovers: u64,
+    /// Periods in a row that ended at rest where the one before did (see
+    /// `travel`'s snap).
+    still: u32,
 }
 
 /// Which speed caps a look ahead must meet.
@@ -286,6 +289,10 @@ fn slower_ahead(q: View, k: usize, dist: f64, v: f64, a: f64, amax: f64, jmax: f
     }
     false
 }
+
+/// Most of the lowest acceleration and jerk limits ahead that closing the
+/// last gap to a stop at once may show in the samples (`Executor::travel`).
+const SNAP_SHARE: f64 = 1e-5;
 
 /// Most of its target speed that tracking aims under it (see
 /// `Executor::advance`): slow feeds then run within 0.1 % of the feed.
@@ -588,6 +595,7 @@ impl Executor {
             caps: Caps::All,
             guard: None,
             takeovers: 0,
+            still: 0,
         }
     }
 
@@ -1749,12 +1757,27 @@ impl Executor {
         }
         // Braking along the curve comes to rest a hair short of a point
         // where it must stop, then creeps; close the last 10 pm at once.
-        let snap = 1e-8;
+        // In long periods a creep may not fit in whole periods at all (75
+        // nm at 10 ms): after three still periods, a jump of d shows in
+        // the samples as d/T, d/T² and 2·d/T³ and nothing else, so close up to
+        // what keeps those within [`SNAP_SHARE`] of the lowest limits up
+        // to the stop (0.4 pm of jerk at 1 ms, below the 10 pm: unchanged).
+        let rested = ds == 0.0 && self.v == 0.0 && self.a == 0.0;
+        self.still = if rested {
+            self.still.saturating_add(1)
+        } else {
+            0
+        };
         if self.v == 0.0 && self.a == 0.0 {
-            let to_zero = self
-                .look_ahead(q, k, self.s, 0.0, 0.0)
-                .zero
-                .map_or(f64::INFINITY, |z| z.0);
+            let zero = self.look_ahead(q, k, self.s, 0.0, 0.0).zero;
+            let to_zero = zero.map_or(f64::INFINITY, |z| z.0);
+            let t = self.period;
+            let snap = match zero {
+                Some((_, amax, jmax)) if self.still >= 3 => (SNAP_SHARE * amax * t * t)
+                    .min(SNAP_SHARE * jmax * t * t * t / 2.0)
+                    .max(1e-8),
+                _ => 1e-8,
+            };
             if to_zero <= snap && !self.hold {
                 let mut left = to_zero;
                 while let Some(seg) = q.get(k).filter(|s| s.is_motion()) {
@@ -2002,7 +2025,16 @@ mod simulation {
             LIMITS.max_acceleration,
             LIMITS.max_jerk,
         );
-        let mut p = Planner::new(&k, Position::ZERO, config);
+        planned_on(&k, text, config)
+    }
+
+    /// `text` planned on `k` from the origin, ending with stop marker 7.
+    fn planned_on(
+        k: &dyn crate::Kinematics,
+        text: &str,
+        config: PlannerConfig,
+    ) -> VecDeque<Segment> {
+        let mut p = Planner::new(k, Position::ZERO, config);
         for c in Interpreter::from_text(text, "t.ngc", Position::ZERO) {
             p.plan(&c.unwrap()).unwrap();
         }
@@ -2472,6 +2504,66 @@ mod simulation {
         assert!(v <= 25.0 && v >= 25.0 - margin - 1e-9, "{v}");
         let peak = out.iter().map(|s| s.velocity).fold(0.0, f64::max);
         assert!(peak <= 75.0 && peak >= 75.0 - margin - 1e-9, "{peak}");
+    }
+
+    /// Long servo periods (the daemon takes up to 10 ms) end a dense program
+    /// at its last stop. A circle of 0.05 mm in 5 µm chords came to rest
+    /// 75 nm short of the end at 8 and 10 ms and stayed there: the jerk
+    /// search found no creep that moves and stops within whole periods.
+    /// At rest for three periods the executor now closes such a gap at
+    /// once, within a hundred-thousandth of the limits.
+    #[test]
+    fn long_periods_close_the_last_nanometres_to_a_stop() {
+        let mut text = String::from("G21 G90 G64 P0.01 Q0\nG0 X150 Y100 Z-10\nG1 F3000\n");
+        for i in 0..3000 {
+            let t = i as f64 * 0.1;
+            text += &format!(
+                "X{:.6} Y{:.6}\n",
+                150.0 + 0.05 * t.cos(),
+                100.0 + 0.05 * t.sin()
+            );
+        }
+        text += "M2\n";
+        // mill3's X and Y, where the stall was found.
+        let (vmax, amax, jmax) = (150.0, 1500.0, 75_000.0);
+        let k = xyz(vmax, amax, jmax);
+        for dt in [0.008, 0.01] {
+            let config = PlannerConfig {
+                period: dt,
+                ..Default::default()
+            };
+            let mut q = planned_on(&k, &text, config);
+            let end = q.back().unwrap().end().to_array();
+            let mut ex = Executor::new(Position::ZERO);
+            let mut points = vec![[0.0; 3]];
+            let finished = (0..100_000).any(|_| {
+                let (a, b) = q.as_slices();
+                let s = ex.tick(dt, a, b);
+                q.drain(..s.consumed);
+                points.push([s.position.x, s.position.y, s.position.z]);
+                s.stopped_at == Some(7)
+            });
+            assert!(finished, "{dt} s: did not finish");
+            let last = points.last().unwrap();
+            assert!(
+                (0..3).all(|i| (last[i] - end[i]).abs() < 1e-12),
+                "{dt} s: ends at {last:?}"
+            );
+            // Within the limits in every sample, the last gap's jump too.
+            for w in points.windows(4) {
+                for ax in 0..3 {
+                    let d1 = (w[3][ax] - w[2][ax]) / dt;
+                    let d2 = (w[3][ax] - 2.0 * w[2][ax] + w[1][ax]) / (dt * dt);
+                    let d3 = (w[3][ax] - 3.0 * w[2][ax] + 3.0 * w[1][ax] - w[0][ax]) / dt.powi(3);
+                    assert!(
+                        d1.abs() <= vmax * (1.0 + 1e-6)
+                            && d2.abs() <= amax * (1.0 + 1e-6)
+                            && d3.abs() <= jmax * (1.0 + 1e-6),
+                        "{dt} s: {d1} {d2} {d3}"
+                    );
+                }
+            }
+        }
     }
 
     /// Feeds of a millimetre a minute and less (fine plunges, inverse-time
