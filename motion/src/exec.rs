@@ -1182,7 +1182,7 @@ impl Executor {
         // speed it would win back is about 1e-4 of the cruise. Never more
         // than [`AIM_SHARE`] of the target, though: at a feed of a few
         // mm/min the fixed slack is the whole feed, and aiming that low
-        // never starts the motion, nor closes the last micrometres to a
+        // never starts the motion, nor closes the last nanometre to a
         // stop.
         let margin = if shaped {
             (jmax * dt * dt / 8.0).min(AIM_SHARE * target)
@@ -1758,10 +1758,10 @@ impl Executor {
         // Braking along the curve comes to rest a hair short of a point
         // where it must stop, then creeps; close the last 10 pm at once.
         // In long periods a creep may not fit in whole periods at all (75
-        // nm at 10 ms): after three still periods, a jump of d shows in
+        // pm at 10 ms): after three still periods, a jump of d shows in
         // the samples as d/T, d/T² and 2·d/T³ and nothing else, so close up to
         // what keeps those within [`SNAP_SHARE`] of the lowest limits up
-        // to the stop (0.4 pm of jerk at 1 ms, below the 10 pm: unchanged).
+        // to the stop (0.4 pm at 1 ms, below the 10 pm: unchanged).
         let rested = ds == 0.0 && self.v == 0.0 && self.a == 0.0;
         self.still = if rested {
             self.still.saturating_add(1)
@@ -2508,12 +2508,12 @@ mod simulation {
 
     /// Long servo periods (the daemon takes up to 10 ms) end a dense program
     /// at its last stop. A circle of 0.05 mm in 5 µm chords came to rest
-    /// 75 nm short of the end at 8 and 10 ms and stayed there: the jerk
+    /// 75 pm short of the end at 8 and 10 ms and stayed there: the jerk
     /// search found no creep that moves and stops within whole periods.
     /// At rest for three periods the executor now closes such a gap at
     /// once, within a hundred-thousandth of the limits.
     #[test]
-    fn long_periods_close_the_last_nanometres_to_a_stop() {
+    fn long_periods_close_the_last_picometres_to_a_stop() {
         let mut text = String::from("G21 G90 G64 P0.01 Q0\nG0 X150 Y100 Z-10\nG1 F3000\n");
         for i in 0..3000 {
             let t = i as f64 * 0.1;
