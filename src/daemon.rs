@@ -20,7 +20,7 @@ use kerf_interp::{
     ProbeOutcome, Source,
 };
 use kerf_machines::Machine;
-use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment, SegmentKind};
+use kerf_motion::{Kinematics, PathMode, Planner, PlannerConfig, Segment};
 use serde_json::{json, Map, Value};
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
 use tokio::net::{TcpListener, UnixListener};
@@ -1821,7 +1821,6 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
         cancel,
     } = job;
     let mut failure = None;
-    let mut last_line = 0;
     let mut planner = Planner::new(&*shared.kins, start, config);
     let canons: Box<dyn Iterator<Item = Result<Canon, String>>> = match source {
         JobSource::Canons(c) => Box::new(c.into_iter().map(Ok)),
@@ -1851,7 +1850,6 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
         if c.source.line < from_line && skipped_before_start(&c.cmd) {
             continue;
         }
-        last_line = c.source.line;
         if let CanonCmd::SetToolTableEntry { data, .. } = &c.cmd {
             if let Err((_, e)) = keep_tool_entry(&shared, data) {
                 failure = Some(e);
@@ -1911,8 +1909,7 @@ fn stream(shared: Arc<Shared>, mut feed: Feed, job: Stream) {
     }
     // The marker follows even a failure or a cancel, so the servo stops
     // there (or, aborting, knows where the job's segments end).
-    let marker = Segment::marker(SegmentKind::Stop { tag }, last_line, planner.position());
-    push(&mut feed, marker, None);
+    push(&mut feed, planner.end_marker(tag), None);
     shared.streaming.store(false, Ordering::Release);
     if let Some(reason) = failure {
         tracing::warn!(job = tag, %reason, "job failed");

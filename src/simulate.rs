@@ -22,7 +22,7 @@ use kerf_io::HalConfig;
 use kerf_machines::Machine;
 use kerf_motion::fuzzy;
 use kerf_motion::offline::PathWindow;
-use kerf_motion::{Planner, PlannerConfig, Segment, SegmentKind, MAX_JOINTS};
+use kerf_motion::{Planner, PlannerConfig, Segment, MAX_JOINTS};
 
 use crate::latency::{LatencyHistogram, LatencyStats};
 use crate::servo::{self, ServoTick};
@@ -243,8 +243,6 @@ pub fn simulate(
     let mut program = program.into_iter();
     let mut pending: VecDeque<Segment> = VecDeque::new();
     let mut program_read = false;
-    // The source line of the last command read.
-    let mut last_line = 0;
     let mut path = PathWindow::new(home, CONTOUR_WINDOW);
 
     let mut report = SimReport {
@@ -276,7 +274,6 @@ pub fn simulate(
             match program.next() {
                 Some(canon) => {
                     let canon = canon?;
-                    last_line = canon.source.line;
                     report.programmed.extend(path.push(&canon));
                     planner.plan(&canon)?;
                 }
@@ -287,13 +284,7 @@ pub fn simulate(
             }
             pending.extend(std::iter::from_fn(|| planner.next_segment()));
             if program_read {
-                // On the program's last line, so that the contour error
-                // at the end is measured against the moves up to it.
-                pending.push_back(Segment::marker(
-                    SegmentKind::Stop { tag: 1 },
-                    last_line,
-                    planner.position(),
-                ));
+                pending.push_back(planner.end_marker(1));
             }
         }
         let started = Instant::now();

@@ -13,7 +13,7 @@ use kerf_interp::{Canon, CanonCmd, InterpError, Position};
 use crate::exec::Executor;
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::path::{distance_to_segment, Arc, Shape, Vec9};
-use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SegmentKind};
+use crate::plan::{PlanError, Planner, PlannerConfig, Segment};
 
 /// Why an offline run stopped early.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -304,11 +304,7 @@ pub fn plan_program(
     }
     planner.finish();
     out.extend(std::iter::from_fn(|| planner.next_segment()));
-    out.push(Segment::marker(
-        SegmentKind::Stop { tag },
-        0,
-        planner.position(),
-    ));
+    out.push(planner.end_marker(tag));
     Ok(out)
 }
 
@@ -352,8 +348,6 @@ pub fn run(
     let mut ticks: u64 = 0;
     let mut program = program.into_iter();
     let mut program_done = false;
-    // The source line of the last command read.
-    let mut last_line = 0;
     // Keep the queue this deep so the executor's look ahead is not starved.
     const DEPTH: usize = 4096;
 
@@ -366,7 +360,6 @@ pub fn run(
                 }
                 Some(canon) => {
                     let canon = canon?;
-                    last_line = canon.source.line;
                     report.programmed.extend(programmed.push(&canon));
                     planner.plan(&canon)?;
                 }
@@ -376,13 +369,7 @@ pub fn run(
                 queue.push_back(seg);
             }
             if program_done {
-                // On the program's last line: the deviation at the end is
-                // measured against the moves up to it.
-                queue.push_back(Segment::marker(
-                    SegmentKind::Stop { tag: 1 },
-                    last_line,
-                    planner.position(),
-                ));
+                queue.push_back(planner.end_marker(1));
             }
         }
         let (a, b) = queue.as_slices();

@@ -561,6 +561,8 @@ pub struct Planner<'k> {
     /// M62/M63/M67 waiting for the next motion segment.
     sync_outputs: SyncOutputs,
     position: Position,
+    /// Source line of the last command given to [`Planner::plan`].
+    last_line: u32,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
     /// G64 Q: straight feeds held for merging (merge.rs).
@@ -1236,6 +1238,7 @@ impl<'k> Planner<'k> {
             force_control: None,
             sync_outputs: SyncOutputs::default(),
             position: start,
+            last_line: 0,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
             merge: CollinearMerge::new(),
@@ -1249,6 +1252,15 @@ impl<'k> Planner<'k> {
     /// Where the tool is after everything planned so far.
     pub fn position(&self) -> Position {
         self.position
+    }
+
+    /// The stop that ends a program (`SegmentKind::Stop { tag }`): where
+    /// the tool is after everything planned, on the source line of the
+    /// last command planned, so that whatever reads the line there (the
+    /// status, the deviation measured against the program) sees the
+    /// program's end, not line 0.
+    pub fn end_marker(&self, tag: u32) -> Segment {
+        Segment::marker(SegmentKind::Stop { tag }, self.last_line, self.position)
     }
 
     /// Set the path control mode for the following moves.
@@ -1301,6 +1313,7 @@ impl<'k> Planner<'k> {
     /// After an error the planner carries on from the move's end, so a
     /// check can report every violation of a program.
     pub fn plan(&mut self, canon: &Canon) -> Result<(), PlanError> {
+        self.last_line = canon.source.line;
         // G64 Q (merge.rs): runs of nearly collinear straight feeds are held
         // and planned as one line. A move that leaves the machine is not
         // held, so its error names its own line.
