@@ -100,24 +100,20 @@ pub fn fmt_state(status: &Status) -> String {
     }
 }
 
-/// The interpreter for `file`, read offline as the daemon would run it
-/// from `start`, with the tools of `tool_table` (a LinuxCNC `.tbl` file;
-/// its warnings go to standard error). Without one, a program that
+/// The interpreter for `file`, read offline as `kerf canon` reads it (its
+/// readable format's configuration) from `start`, with the tools of
+/// `tool_table` (a LinuxCNC `.tbl` file). Without one, a program that
 /// changes or measures tools stops at its first T word.
 pub fn open_program(
     file: &Path,
     start: kerf_interp::Position,
     tool_table: Option<&Path>,
 ) -> Result<kerf_interp::Interpreter<'static>, Failure> {
-    let mut cfg = kerf_interp::Config {
-        start_position: start,
-        ..kerf_interp::Config::default()
-    };
-    if let Some(tbl) = tool_table {
-        for w in cfg.load_tool_table(tbl).map_err(Failure::new)? {
-            eprintln!("kerf: warning: {w}");
-        }
-    }
+    let mut cfg = canon::config(&canon::CanonOptions {
+        tool_table: tool_table.map(Path::to_path_buf),
+        ..Default::default()
+    })?;
+    cfg.start_position = start;
     kerf_interp::Interpreter::open_with(file, cfg, Box::new(kerf_interp::Offline::default()))
         .map_err(|e| Failure::new(format!("{}: {e}", file.display())))
 }
