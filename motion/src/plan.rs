@@ -1011,9 +1011,9 @@ impl FitWindow {
 }
 
 /// Bounds on |dp_i/ds|, |d²p_i/ds²| and |d³p_i/ds³| of either plane axis
-/// along a spiral arc `length` mm long, whose radius changes in the
-/// program's rounding (or up to the interpreter's spiral tolerance, which
-/// on a small arc is more than the radius itself).
+/// along an arc `length` mm long: a circle or helix, or a spiral whose
+/// radius changes in the program's rounding (or up to the interpreter's
+/// spiral tolerance, which on a small arc is more than the radius itself).
 ///
 /// The arc moves angle θ = θ0 + S·f and radius r = r0 + D·f in proportion
 /// to the fraction f = s / length of the path, so a plane axis is
@@ -1021,11 +1021,11 @@ impl FitWindow {
 /// cosine: D·cos θ − r·S·sin θ, −2·D·S·sin θ − r·S²·cos θ and
 /// −3·D·S²·cos θ + r·S³·sin θ, bounded by the root of the sum of the
 /// squares of their coefficients, at the larger radius. On a circle (D = 0)
-/// these are r·w, r·w² and r·w³. Taking the start radius for all of the
+/// these are r·w, r·w² and r·w³ (w = dθ/ds). Taking the start radius for all of the
 /// arc, as circles do, understated them by up to the ratio of the radii
 /// (an arc of 0.01 mm spiralling out to 0.03 mm ran at 1.13 times the jerk
 /// limit).
-fn spiral_extremes(arc: &Arc, length: f64) -> (f64, f64, f64) {
+fn arc_extremes(arc: &Arc, length: f64) -> (f64, f64, f64) {
     if length <= 0.0 {
         return (0.0, 0.0, 0.0);
     }
@@ -2264,18 +2264,7 @@ impl<'k> Planner<'k> {
                 // The other axes move in proportion to the path: their
                 // tangent is constant.
                 let f = shape.frame(0.0);
-                let (in_plane, bend, rate) = if arc.end_radius == arc.radius {
-                    // A circle or helix: constant curvature r·w² and its
-                    // rate r·|w|³ (w = dθ/ds).
-                    let w = if length > 0.0 {
-                        arc.sweep.abs() / length
-                    } else {
-                        0.0
-                    };
-                    (arc.radius * w, arc.radius * w * w, arc.radius * w * w * w)
-                } else {
-                    spiral_extremes(arc, length)
-                };
+                let (in_plane, bend, rate) = arc_extremes(arc, length);
                 for i in 0..9 {
                     if i == arc.plane.0 || i == arc.plane.1 {
                         t_max[i] = in_plane;
@@ -2805,23 +2794,17 @@ mod tests {
         assert!(s.max_acceleration <= 500.0 + 1e-9);
     }
 
-    /// `spiral_extremes` bounds the first three derivatives of the plane
+    /// `arc_extremes` bounds the first three derivatives of the plane
     /// axes in the path parameter, checked by finite differences of the
     /// arc's points (an independent route: `Arc::point_at_fraction`) on
     /// spirals from nearly circles to radii that triple.
     #[test]
-    fn spiral_extremes_bound_the_derivatives_of_the_plane_axes() {
-        let mut seed = 7u64;
-        let mut r = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+    fn arc_extremes_bound_the_derivatives_of_the_plane_axes() {
+        let mut r = crate::testkit::uniform(7);
         for _ in 0..200 {
             let r0 = 0.01 + 20.0 * r();
-            let r1 =
-                r0 * (1.0 + [1e-5, 0.01, 0.5, 2.0][(4.0 * r()) as usize % 4] * (2.0 * r() - 1.0));
+            let r1 = r0
+                * (1.0 + [0.0, 1e-5, 0.01, 0.5, 2.0][(5.0 * r()) as usize % 5] * (2.0 * r() - 1.0));
             let sweep = (0.1 + 6.0 * r()) * if r() < 0.5 { 1.0 } else { -1.0 };
             let arc = Arc {
                 plane: (0, 1),
@@ -2834,7 +2817,7 @@ mod tests {
                 end: [0.0; 9],
             };
             let length = arc.length();
-            let (t, k, dk) = spiral_extremes(&arc, length);
+            let (t, k, dk) = arc_extremes(&arc, length);
             // Derivatives in s at interior fractions, by central
             // differences of step h (in s).
             let h = length * 1e-3;
