@@ -17,9 +17,14 @@ fn program(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
 
 /// `kerf plan --json` of `text` on mill3: the report, once it succeeded.
 fn plan_json(text: &str) -> serde_json::Value {
+    plan_json_with(text, &[])
+}
+
+/// [`plan_json`] with more of `kerf plan`'s options.
+fn plan_json_with(text: &str, options: &[&str]) -> serde_json::Value {
     let dir = tempfile::tempdir().unwrap();
     let p = program(&dir, "plan.ngc", text);
-    let out = kerf(&["plan", &p, "--json"]);
+    let out = kerf(&[&["plan", p.as_str(), "--json"], options].concat());
     assert!(
         out.status.success(),
         "{}",
@@ -98,15 +103,7 @@ fn trapezoidal_plan_takes_the_trapezoid_time() {
     // ramps for v/A each way and cruises the rest.
     let (v, a, len) = (100.0f64, 1500.0f64, 100.0f64);
     let want = 2.0 * v / a + (len - v * v / a) / v;
-    let dir = tempfile::tempdir().unwrap();
-    let p = program(&dir, "trap.ngc", "G1 X100 F6000\nM2\n");
-    let out = kerf(&["plan", &p, "--trapezoidal", "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let json = plan_json_with("G1 X100 F6000\nM2\n", &["--trapezoidal"]);
     let got = json["cycle_time_s"].as_f64().unwrap();
     // Within 0.6 %: whole periods at each end, cruising 0.1 % under the
     // feed, and the stop's profile braking a little under the limit so as
