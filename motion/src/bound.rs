@@ -852,22 +852,43 @@ impl<'k> TimeBound<'k> {
     }
 }
 
-/// d³p/ds³ on arc `a` of length `len` at `s`: θ = θ0 + w·s and r = r0 +
-/// r′·s in the plane (the axial part moves linearly, no third
-/// derivative). On a circle or helix (r′ = 0) it is −w²·p′ in the plane,
-/// orthogonal to the normal.
+/// d³p/ds³ on arc `a` of length `len` at `s`. On a circle or helix
+/// (θ = θ0 + w·s) it is −w²·p′ in the plane, orthogonal to the normal.
+/// On a spiral (`Shape::frame`: r = r0 + D·s/len, r·θ′ = c constant)
+/// the curvature is w·((D/len)·n1 − c·n2) with w = c/r, n1 = (−sin θ,
+/// cos θ), n2 = (cos θ, sin θ), and its derivative
+/// w′·((D/len)·n1 − c·n2) − w²·((D/len)·n2 + c·n1), w′ = −w·D/(len·r).
+/// (The axial part moves linearly: no third derivative.)
 fn arc_third(a: &Arc, s: f64, len: f64) -> Vec9 {
     let mut p3 = [0.0; 9];
     if len <= 0.0 {
         return p3;
     }
-    let f = (s / len).clamp(0.0, 1.0);
-    let (sin, cos) = (a.start_angle + a.sweep * f).sin_cos();
-    let r = a.radius + (a.end_radius - a.radius) * f;
-    let w = a.sweep / len;
-    let dr = (a.end_radius - a.radius) / len;
-    p3[a.plane.0] = -3.0 * dr * w * w * cos + r * w * w * w * sin;
-    p3[a.plane.1] = -3.0 * dr * w * w * sin - r * w * w * w * cos;
+    let q = (s / len).clamp(0.0, 1.0);
+    let d = a.end_radius - a.radius;
+    if !a.is_logarithmic() {
+        // θ = θ0 + w·s, r = r0 + r′·s (a circle, or a spiral from or to
+        // its centre).
+        let (sin, cos) = (a.start_angle + a.sweep * q).sin_cos();
+        let r = a.radius + d * q;
+        let w = a.sweep / len;
+        let dr = d / len;
+        p3[a.plane.0] = -3.0 * dr * w * w * cos + r * w * w * w * sin;
+        p3[a.plane.1] = -3.0 * dr * w * w * sin - r * w * w * w * cos;
+        return p3;
+    }
+    let (sin, cos) = (a.start_angle + a.sweep * a.sweep_fraction(q)).sin_cos();
+    let (_, h) = a.growth();
+    let r = a.radius + d * q;
+    let c = a.sweep * h / len;
+    let w = c / r;
+    let dr = d / len;
+    let w1 = -w * dr / r;
+    let (n1, n2) = ([-sin, cos], [cos, sin]);
+    for k in 0..2 {
+        let axis = if k == 0 { a.plane.0 } else { a.plane.1 };
+        p3[axis] = w1 * (dr * n1[k] - c * n2[k]) - w * w * (dr * n2[k] + c * n1[k]);
+    }
     p3
 }
 

@@ -85,7 +85,10 @@ pub struct Arc {
     pub center: (f64, f64),
     pub radius: f64,
     /// Radius at the end: programs give end points a hair off the circle,
-    /// and the arc then spirals, radius linear in angle, to end exactly there.
+    /// and the arc then spirals to end exactly there: a logarithmic
+    /// spiral, radius geometric in angle (and linear in arc length), so the
+    /// tool moves at the path speed all along it, its tangent a unit
+    /// vector at its ends as at lines and blends.
     pub end_radius: f64,
     /// Angle of the start point, radians, measured from the first axis.
     pub start_angle: f64,
@@ -267,18 +270,88 @@ impl Arc {
         d
     }
 
+    /// ln(end radius / radius), the spiral's growth over the sweep (0 on a
+    /// circle), and h = (end radius − radius) / growth, which tends to the
+    /// radius as the spiral tends to a circle: the in-plane length is
+    /// √(D² + (h·sweep)²) for a radius change D.
+    pub(crate) fn growth(&self) -> (f64, f64) {
+        if !self.is_logarithmic() {
+            return (0.0, self.radius);
+        }
+        let d = self.end_radius - self.radius;
+        let growth = (d / self.radius).ln_1p();
+        (growth, d / growth)
+    }
+
+    /// Whether the arc is a logarithmic spiral (see
+    /// [`end_radius`](Self::end_radius)). Not a circle, and not one that
+    /// starts or ends at (or within a thousandth of its larger radius of)
+    /// its centre, which no such spiral reaches: those, only possible on
+    /// arcs under the interpreter's spiral tolerance, keep the radius
+    /// linear in angle, and their speed along the path varies with it.
+    pub(crate) fn is_logarithmic(&self) -> bool {
+        let (low, high) = (
+            self.radius.min(self.end_radius),
+            self.radius.max(self.end_radius),
+        );
+        low != high && low > 1e-3 * high && (low / high).ln() != 0.0
+    }
+
+    /// Length of the in-plane part, mm.
+    pub fn in_plane_length(&self) -> f64 {
+        let d = self.end_radius - self.radius;
+        if !self.is_logarithmic() {
+            return (self.radius + self.end_radius) / 2.0 * self.sweep.abs();
+        }
+        let (_, h) = self.growth();
+        (d * d + (h * self.sweep).powi(2)).sqrt()
+    }
+
     /// Helix length: the in-plane arc and the linear axes (XYZ part only
     /// when XYZ move, as for lines).
     pub fn length(&self) -> f64 {
         let d = self.axial_delta();
         let xyz_axial: f64 = d[..3].iter().map(|x| x * x).sum();
-        let in_plane = (self.radius + self.end_radius) / 2.0 * self.sweep.abs();
+        let in_plane = self.in_plane_length();
         (in_plane * in_plane + xyz_axial).sqrt()
     }
 
-    /// Point at fraction `f` (0 to 1) of the sweep, where angle, radius
-    /// and the linear axes all move in proportion: the ends exactly as
-    /// programmed.
+    /// Radius at fraction `f` of the sweep: geometric in f (linear on
+    /// the spirals that are not logarithmic).
+    fn radius_at(&self, f: f64) -> f64 {
+        let (growth, _) = self.growth();
+        if growth == 0.0 {
+            self.radius + (self.end_radius - self.radius) * f
+        } else {
+            self.radius * (growth * f).exp()
+        }
+    }
+
+    /// Fraction of the length (and of the linear axes' travel) at fraction
+    /// `f` of the sweep: the radius is linear in length.
+    fn length_fraction(&self, f: f64) -> f64 {
+        let (growth, _) = self.growth();
+        if growth == 0.0 {
+            f
+        } else {
+            // (r(f) − r0) / (r1 − r0), without the cancellation when the
+            // radii differ only in rounding.
+            (growth * f).exp_m1() / growth.exp_m1()
+        }
+    }
+
+    /// Fraction of the sweep at fraction `q` of the arc's length: the
+    /// inverse of [`length_fraction`](Self::length_fraction).
+    pub fn sweep_fraction(&self, q: f64) -> f64 {
+        let (growth, _) = self.growth();
+        if growth == 0.0 {
+            return q;
+        }
+        ((self.end_radius - self.radius) / self.radius * q).ln_1p() / growth
+    }
+
+    /// Point at fraction `f` (0 to 1) of the sweep, the linear axes in
+    /// proportion to the length travelled: the ends exactly as programmed.
     pub fn point_at_fraction(&self, f: f64) -> Vec9 {
         if f <= 0.0 {
             return self.start;
@@ -287,9 +360,10 @@ impl Arc {
             return self.end;
         }
         let theta = self.start_angle + self.sweep * f;
-        let r = self.radius + (self.end_radius - self.radius) * f;
+        let r = self.radius_at(f);
+        let q = self.length_fraction(f);
         let axial = self.axial_delta();
-        let mut p: Vec9 = std::array::from_fn(|i| self.start[i] + axial[i] * f);
+        let mut p: Vec9 = std::array::from_fn(|i| self.start[i] + axial[i] * q);
         p[self.plane.0] = self.center.0 + r * theta.cos();
         p[self.plane.1] = self.center.1 + r * theta.sin();
         p
@@ -302,8 +376,8 @@ impl Arc {
         Arc {
             plane: self.plane,
             center: self.center,
-            radius: self.radius + (self.end_radius - self.radius) * f0,
-            end_radius: self.radius + (self.end_radius - self.radius) * f1,
+            radius: self.radius_at(f0),
+            end_radius: self.radius_at(f1),
             start_angle: self.start_angle + self.sweep * f0,
             sweep: self.sweep * (f1 - f0),
             start: self.point_at_fraction(f0),
@@ -315,13 +389,22 @@ impl Arc {
     /// far any point of a chord can be from the arc, mm: at most `sag`,
     /// with no more than `most` chords (then the bound is what they give).
     ///
-    /// Interpolating p(f) linearly over Δf strays at most Δf²/8·max|p″|,
-    /// and with radius and angle linear in f (the linear axes add nothing)
-    /// |p″| ≤ 2·|dr/df|·|dθ/df| + r_max·(dθ/df)².
+    /// Interpolating p(f) linearly over Δf strays at most Δf²/8·max|p″|.
+    /// On a logarithmic spiral, in the plane p(f) is r0·e^((g + i·S)·f) as a complex number (growth
+    /// g, sweep S), so |p″| = (g² + S²)·r ≤ (g² + S²)·r_max; the linear
+    /// axes move in proportion to r − r0, which adds (travel / D)·g²·r_max.
     pub fn chords(&self, f0: f64, f1: f64, sag: f64, most: usize) -> (Vec<Line>, f64) {
-        let dr = self.end_radius - self.radius;
-        let curl = 2.0 * dr.abs() * self.sweep.abs()
-            + self.radius.max(self.end_radius) * self.sweep * self.sweep;
+        let (growth, _) = self.growth();
+        let r_max = self.radius.max(self.end_radius);
+        let d = self.end_radius - self.radius;
+        let curl = if growth == 0.0 {
+            // Radius linear in f: |p″| ≤ 2·|dr/df|·|dθ/df| + r_max·(dθ/df)²,
+            // the linear axes in proportion to f.
+            2.0 * d.abs() * self.sweep.abs() + r_max * self.sweep * self.sweep
+        } else {
+            let axial = norm(&self.axial_delta()) / d.abs() * growth * growth * r_max;
+            (growth * growth + self.sweep * self.sweep) * r_max + axial
+        };
         let span = (f1 - f0).max(0.0);
         let n = if sag > 0.0 {
             (span * (curl / (8.0 * sag)).sqrt()).ceil() as usize
@@ -1010,21 +1093,31 @@ impl Shape {
         }
     }
 
+    /// A circle or helix, or a spiral: a logarithmic one (`Arc::end_radius`)
+    /// by arc length, radius r0 + D·q at fraction q of the length L and
+    /// angle θ0 + sweep·ln(r/r0)/g (growth g), so dθ/ds = w =
+    /// sweep·h/(r·L) and r·w is constant, the tangent a unit vector and
+    /// the curvature w·((D/L)·n1 − r·w·n2) with n1 = (−sin θ, cos θ),
+    /// n2 = (cos θ, sin θ); one from or to its centre with angle and radius
+    /// linear in q.
     fn frame_arc(&self, a: &Arc, s: f64) -> Frame {
         let len = a.length();
-        let f = if len > 0.0 {
+        let q = if len > 0.0 {
             (s / len).clamp(0.0, 1.0)
         } else {
             1.0
         };
+        let logarithmic = a.is_logarithmic();
+        let f = if logarithmic { a.sweep_fraction(q) } else { q };
+        let d = a.end_radius - a.radius;
         let theta = a.start_angle + a.sweep * f;
         let (sin, cos) = theta.sin_cos();
-        let r = a.radius + (a.end_radius - a.radius) * f;
+        let r = a.radius + d * q;
         let axial = a.axial_delta();
-        let mut p: Vec9 = std::array::from_fn(|i| a.start[i] + axial[i] * f);
+        let mut p: Vec9 = std::array::from_fn(|i| a.start[i] + axial[i] * q);
         p[a.plane.0] = a.center.0 + r * cos;
         p[a.plane.1] = a.center.1 + r * sin;
-        if f >= 1.0 {
+        if q >= 1.0 {
             // End exactly where the program said.
             p = a.end;
         }
@@ -1036,14 +1129,23 @@ impl Shape {
             };
         }
         // dθ/ds = w, dr/ds = dr; the axial part moves at axial / len.
-        let w = a.sweep / len;
-        let dr = (a.end_radius - a.radius) / len;
+        let dr = d / len;
         let mut t: Vec9 = std::array::from_fn(|i| axial[i] / len);
-        t[a.plane.0] = dr * cos - r * sin * w;
-        t[a.plane.1] = dr * sin + r * cos * w;
         let mut k = [0.0; 9];
-        k[a.plane.0] = -2.0 * dr * w * sin - r * cos * w * w;
-        k[a.plane.1] = 2.0 * dr * w * cos - r * sin * w * w;
+        if logarithmic {
+            let rw = a.sweep * a.growth().1 / len;
+            let w = rw / r;
+            t[a.plane.0] = dr * cos - rw * sin;
+            t[a.plane.1] = dr * sin + rw * cos;
+            k[a.plane.0] = w * (-dr * sin - rw * cos);
+            k[a.plane.1] = w * (dr * cos - rw * sin);
+        } else {
+            let w = a.sweep / len;
+            t[a.plane.0] = dr * cos - r * sin * w;
+            t[a.plane.1] = dr * sin + r * cos * w;
+            k[a.plane.0] = -2.0 * dr * w * sin - r * cos * w * w;
+            k[a.plane.1] = 2.0 * dr * w * cos - r * sin * w * w;
+        }
         Frame {
             point: p,
             tangent: t,
@@ -1152,6 +1254,77 @@ mod tests {
         let mid = Shape::Arc(zx).point(Shape::Arc(zx).length() / 2.0);
         let r = 5.0 / 2f64.sqrt();
         assert!((mid[0] - r).abs() < 1e-12 && (mid[2] - r).abs() < 1e-12 && mid[1] == 0.0);
+    }
+
+    /// A spiral's points are spaced by arc length: the tool moves at the
+    /// path speed all along it, as at the lines and blends it joins (with
+    /// the radius linear in angle and the path parameter a fraction of the
+    /// sweep, an arc of 0.01 mm spiralling out to 0.03 mm started at half
+    /// the path speed and ended at 1.5 times it: the speed jumped at both
+    /// junctions, 1.45 times the Y jerk limit on mill3). Checked against an
+    /// independent route: the length of a fine polyline through
+    /// `point_at_fraction`, and chords between nearby points.
+    #[test]
+    fn a_spiral_is_followed_at_the_path_speed() {
+        let mut r = crate::testkit::uniform(11);
+        for case in 0..60 {
+            let r0 = 0.01 + 10.0 * r();
+            let r1 = r0 * [1.0 + 1e-12, 1.0 + 1e-4, 1.5, 3.0, 1.0 / 3.0][case % 5];
+            let sweep = (0.2 + 6.0 * r()) * if r() < 0.5 { 1.0 } else { -1.0 };
+            let a0: f64 = 6.0 * r();
+            let rise = if case % 2 == 0 { 0.0 } else { 5.0 * r() };
+            let start = v(r0 * a0.cos(), r0 * a0.sin(), 0.0);
+            let end = v(r1 * (a0 + sweep).cos(), r1 * (a0 + sweep).sin(), rise);
+            let arc = Arc {
+                plane: (0, 1),
+                center: (0.0, 0.0),
+                radius: r0,
+                end_radius: r1,
+                start_angle: a0,
+                sweep,
+                start,
+                end,
+            };
+            let shape = Shape::Arc(arc);
+            let length = shape.length();
+            // The length, against 20,000 chords through the sweep.
+            let n = 20_000;
+            let polyline: f64 = (0..n)
+                .map(|k| {
+                    let (p, q) = (
+                        arc.point_at_fraction(k as f64 / n as f64),
+                        arc.point_at_fraction((k + 1) as f64 / n as f64),
+                    );
+                    norm(&std::array::from_fn(|i| q[i] - p[i]))
+                })
+                .sum();
+            assert!(
+                (polyline - length).abs() <= 1e-6 * length,
+                "{r0} {r1} {sweep}: length {length}, polyline {polyline}"
+            );
+            assert_eq!(shape.point(0.0), start);
+            assert_eq!(shape.point(length), end);
+            let h = length * 1e-5;
+            for k in 1..50 {
+                let s = length * k as f64 / 50.0;
+                let (p, q) = (shape.point(s - h), shape.point(s + h));
+                let speed = norm(&std::array::from_fn(|i| q[i] - p[i])) / (2.0 * h);
+                assert!(
+                    (speed - 1.0).abs() < 1e-6,
+                    "{r0} {r1}: speed {speed} at {s}"
+                );
+                let f = shape.frame(s);
+                assert!((norm(&f.tangent) - 1.0).abs() < 1e-12);
+                // The same point as the sweep's fraction gives.
+                let at = arc.point_at_fraction(arc.sweep_fraction(s / length));
+                assert!(norm(&std::array::from_fn(|i| at[i] - f.point[i])) < 1e-9 * r0.max(1.0));
+                // And the curvature is the tangent's rate of change.
+                let (_, d2) = numeric(&shape, s);
+                for i in 0..3 {
+                    assert!((d2[i] - f.curvature[i]).abs() < 1e-4 * (1.0 + d2[i].abs()));
+                }
+            }
+        }
     }
 
     #[test]

@@ -394,7 +394,7 @@ impl Pending {
         let t: Vec9 = std::array::from_fn(|i| frame.tangent[i] / n);
         let along: f64 = (0..9).map(|i| frame.curvature[i] * t[i]).sum();
         Some(Frame {
-            point: arc.point_at_fraction(f),
+            point: arc.point_at_fraction(arc.sweep_fraction(f)),
             tangent: t,
             curvature: std::array::from_fn(|i| frame.curvature[i] - along * t[i]),
         })
@@ -407,8 +407,12 @@ impl Pending {
         match &self.source {
             AsProgrammed::Line(p) => (vec![Near::new(&p.line)], 0.0),
             AsProgrammed::Arc(arc) => {
-                let f = (reach / arc.length()).min(1.0);
-                let (f0, f1) = if from_end { (1.0 - f, 1.0) } else { (0.0, f) };
+                let q = (reach / arc.length()).min(1.0);
+                let (f0, f1) = if from_end {
+                    (arc.sweep_fraction(1.0 - q), 1.0)
+                } else {
+                    (0.0, arc.sweep_fraction(q))
+                };
                 let (chords, sag) = arc.chords(f0, f1, sag, 256);
                 (chords.iter().map(Near::new).collect(), sag)
             }
@@ -1015,27 +1019,37 @@ impl FitWindow {
 /// radius changes in the program's rounding (or up to the interpreter's
 /// spiral tolerance, which on a small arc is more than the radius itself).
 ///
-/// The arc moves angle θ = θ0 + S·f and radius r = r0 + D·f in proportion
-/// to the fraction f = s / length of the path, so a plane axis is
-/// r·cos θ (or r·sin θ) and its derivatives in f are sums of a sine and a
-/// cosine: D·cos θ − r·S·sin θ, −2·D·S·sin θ − r·S²·cos θ and
-/// −3·D·S²·cos θ + r·S³·sin θ, bounded by the root of the sum of the
-/// squares of their coefficients, at the larger radius. On a circle (D = 0)
-/// these are r·w, r·w² and r·w³ (w = dθ/ds). Taking the start radius for all of the
-/// arc, as circles do, understated them by up to the ratio of the radii
-/// (an arc of 0.01 mm spiralling out to 0.03 mm ran at 1.13 times the jerk
-/// limit).
+/// On a circle (sweep S, radius r, w = S/length) these are r·w, r·w² and
+/// r·w³. A logarithmic spiral (`Shape::frame`) has a unit tangent whose in-plane
+/// part is Lp/length (Lp its in-plane length), curvature w·Lp/length with
+/// w = dθ/ds = S·h/(r·length) largest at the smaller radius, and
+/// d(curvature)/ds of at most (|w′| + w²)·Lp/length with
+/// w′ = −w·D/(r·length). Taking the start radius for all of the arc, as
+/// circles do, understated them by up to the ratio of the radii (an arc of
+/// 0.01 mm spiralling out to 0.03 mm ran at 1.13 times the jerk limit).
 fn arc_extremes(arc: &Arc, length: f64) -> (f64, f64, f64) {
     if length <= 0.0 {
         return (0.0, 0.0, 0.0);
     }
-    let (s, d) = (arc.sweep.abs(), (arc.end_radius - arc.radius).abs());
-    let rs = arc.radius.max(arc.end_radius) * s;
-    (
-        (d * d + rs * rs).sqrt() / length,
-        s * (4.0 * d * d + rs * rs).sqrt() / (length * length),
-        s * s * (9.0 * d * d + rs * rs).sqrt() / (length * length * length),
-    )
+    let s = arc.sweep.abs();
+    let d = (arc.end_radius - arc.radius).abs();
+    if !arc.is_logarithmic() {
+        // Angle θ0 + S·f and radius r0 + D·f at f = s / length: the
+        // derivatives in f of a plane axis are sums of a sine and a cosine
+        // (D·cos θ − r·S·sin θ, −2·D·S·sin θ − r·S²·cos θ,
+        // −3·D·S²·cos θ + r·S³·sin θ), bounded at the larger radius.
+        let rs = arc.radius.max(arc.end_radius) * s;
+        return (
+            (d * d + rs * rs).sqrt() / length,
+            s * (4.0 * d * d + rs * rs).sqrt() / (length * length),
+            s * s * (9.0 * d * d + rs * rs).sqrt() / (length * length * length),
+        );
+    }
+    let (_, h) = arc.growth();
+    let r_min = arc.radius.min(arc.end_radius);
+    let along = arc.in_plane_length() / length;
+    let w = s * h.abs() / (r_min * length);
+    (along, w * along, (w * d / (r_min * length) + w * w) * along)
 }
 
 /// The control points of the two halves of a quintic Bézier, split at
@@ -1852,8 +1866,9 @@ impl<'k> Planner<'k> {
         if let (AsProgrammed::Line(p), Shape::Line(trimmed)) = (&a.source, &mut a.segment.shape) {
             trimmed.end = std::array::from_fn(|i| p.line.end[i] - legs.0 * p.direction[i]);
         } else if let Some(arc) = a.arc() {
-            let f0 = a.start_leg / full;
-            a.segment.shape = Shape::Arc(arc.part(f0, (1.0 - legs.0 / full).max(f0)));
+            let f0 = arc.sweep_fraction(a.start_leg / full);
+            let f1 = arc.sweep_fraction(1.0 - legs.0 / full).max(f0);
+            a.segment.shape = Shape::Arc(arc.part(f0, f1));
         }
         a.segment.length = a.segment.shape.length();
         let a_kind = a.segment.kind;
@@ -1870,7 +1885,7 @@ impl<'k> Planner<'k> {
         if let (AsProgrammed::Line(p), Shape::Line(trimmed)) = (&b.source, &mut b.segment.shape) {
             trimmed.start = std::array::from_fn(|i| p.line.start[i] + legs.1 * p.direction[i]);
         } else if let Some(arc) = b.arc() {
-            b.segment.shape = Shape::Arc(arc.part(legs.1 / full, 1.0));
+            b.segment.shape = Shape::Arc(arc.part(arc.sweep_fraction(legs.1 / full), 1.0));
         }
         b.segment.length = b.segment.shape.length();
         b.start_leg = legs.1;
@@ -2795,9 +2810,9 @@ mod tests {
     }
 
     /// `arc_extremes` bounds the first three derivatives of the plane
-    /// axes in the path parameter, checked by finite differences of the
-    /// arc's points (an independent route: `Arc::point_at_fraction`) on
-    /// spirals from nearly circles to radii that triple.
+    /// axes in arc length, checked by finite differences of the points the
+    /// executor follows (`Shape::point`) on spirals from nearly circles to
+    /// radii that triple.
     #[test]
     fn arc_extremes_bound_the_derivatives_of_the_plane_axes() {
         let mut r = crate::testkit::uniform(7);
@@ -2821,7 +2836,7 @@ mod tests {
             // Derivatives in s at interior fractions, by central
             // differences of step h (in s).
             let h = length * 1e-3;
-            let at = |s: f64| arc.point_at_fraction(s / length);
+            let at = |s: f64| Shape::Arc(arc).point(s);
             for n in 1..100 {
                 let s0 = length * n as f64 / 100.0;
                 for i in 0..2 {
