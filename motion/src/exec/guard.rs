@@ -24,8 +24,8 @@
 use super::{Brake, View};
 
 /// Profiles in a guard at most: easing a positive acceleration off, a
-/// stop, and before it aims at the speed caps the stop alone would pass
-/// too fast.
+/// stop, and before it aims at the junctions the stop alone would pass
+/// too fast or enter too hard, or braking up to the end of a segment.
 const LEGS: usize = 8;
 
 /// Segments a guard may cross (a stop from 100 mm/s over 0.01 mm chords
@@ -63,8 +63,12 @@ pub(super) struct Guard {
 enum Miss {
     /// It passes the junction `at` mm ahead faster than `cap` allows.
     Speed { at: f64, cap: f64 },
-    /// Anything else: an acceleration or jerk limit, a point where the
-    /// motion must be at rest, or beyond the segments it may look at.
+    /// It enters the segment starting `at` mm ahead (junction cap `cap`)
+    /// with more acceleration or jerk than that segment allows.
+    Limits { at: f64, cap: f64 },
+    /// Anything else: an acceleration or jerk limit of the segment it
+    /// starts in, a point where the motion must be at rest, or beyond the
+    /// segments it may look at.
     Other,
 }
 
@@ -134,40 +138,75 @@ impl Guard {
             (v, a) = (easing.crest, 0.0);
         }
         loop {
-            let stop = path.lowest_stop(from, v, a)?;
-            let (at, cap) = match path.check(from, &stop, from + stop.length()) {
+            if guard.n >= LEGS {
+                return None;
+            }
+            // Braking harder than a segment ahead allows, no stop under the
+            // lowest limits within reach exists: stop under the limits
+            // here, which enters that segment too hard, and aim at it.
+            let here = path.lowest_limits(from, from);
+            let rest = path
+                .lowest_stop(from, v, a)
+                .or_else(|| stop(v, a, here.0, here.1))?;
+            let miss = match path.check(from, &rest, from + rest.length()) {
                 Ok(()) => {
                     guard.legs[guard.n] = Leg {
-                        brake: stop,
+                        brake: rest,
                         start,
                         from,
                     };
                     guard.n += 1;
                     return Some(guard);
                 }
-                Err(Miss::Speed { at, cap }) => (at, cap),
-                Err(Miss::Other) => return None,
+                Err(Miss::Speed { at, cap } | Miss::Limits { at, cap }) => Some((at, cap)),
+                Err(Miss::Other) => None,
             };
-            // The stop passes a junction too fast: aim at its cap under
-            // the limits before it, arriving with zero acceleration, and
-            // go on from there.
-            if guard.n + 2 > LEGS || cap <= 0.0 || at <= from {
+            // The stop passes a junction too fast, or enters the segment
+            // after it harder than that segment allows: aim at its cap
+            // under the limits before it, arriving with zero acceleration,
+            // and go on from there.
+            if let Some((aim, at)) = miss.and_then(|(at, cap)| path.aim(from, v, a, at, cap)) {
+                guard.legs[guard.n] = Leg {
+                    brake: aim,
+                    start,
+                    from,
+                };
+                guard.n += 1;
+                start += aim.duration() + (at - from - aim.length()).max(0.0) / aim.v1;
+                (from, v, a) = (at.max(from + aim.length()), aim.v1, 0.0);
+                continue;
+            }
+            // Otherwise brake under the limits here up to the end of this
+            // segment (holding the speed, if it is not braking), and look
+            // again from there: the way the look ahead passes a cap below
+            // its speed, braking on into the next segment.
+            let end = path.end_of_segment_at(from)?;
+            let brake = if a == 0.0 {
+                Brake::cruise(v)
+            } else {
+                stop(v, a, here.0, here.1)?
+            };
+            if a != 0.0 && brake.length() <= end - from {
+                // At rest within this segment after all.
+                path.check(from, &brake, from + brake.length()).ok()?;
+                guard.legs[guard.n] = Leg { brake, start, from };
+                guard.n += 1;
+                return Some(guard);
+            }
+            path.check(from, &brake, end).ok()?;
+            let t = if a == 0.0 {
+                (end - from) / v
+            } else {
+                brake.time_at_distance(end - from)
+            };
+            let (_, v_end, a_end) = brake.at(t);
+            if v_end <= 0.0 {
                 return None;
             }
-            let (amax, jmax) = path.lowest_limits(from, at);
-            let aim = Brake::within(v, a, cap, at - from, amax, jmax)?;
-            if aim.length() > (at - from) * (1.0 + ROUNDING) {
-                return None;
-            }
-            path.check(from, &aim, at).ok()?;
-            guard.legs[guard.n] = Leg {
-                brake: aim,
-                start,
-                from,
-            };
+            guard.legs[guard.n] = Leg { brake, start, from };
             guard.n += 1;
-            start += aim.duration() + (at - from - aim.length()).max(0.0) / cap;
-            (from, v, a) = (at, cap, 0.0);
+            start += t;
+            (from, v, a) = (end, v_end, a_end);
         }
     }
 }
@@ -307,6 +346,41 @@ impl Path<'_> {
         })
     }
 
+    /// A profile from (`v`, `a`) `from` mm ahead that arrives at the
+    /// junction `at` mm ahead, under the limits before it, no faster than
+    /// its `cap` (and, braking already, no faster than easing that off at
+    /// once leaves) with zero acceleration, checked; and where it leaves
+    /// off. Cruising below the cap, it holds the speed.
+    fn aim(&self, from: f64, v: f64, a: f64, at: f64, cap: f64) -> Option<(Brake, f64)> {
+        if cap <= 0.0 || at <= from {
+            return None;
+        }
+        let (amax, jmax) = self.lowest_limits(from, at);
+        let target = cap.min(v - a.min(0.0).powi(2) / (2.0 * jmax));
+        let aim = if target < v {
+            Brake::within(v, a, target, at - from, amax, jmax)?
+        } else if a == 0.0 {
+            Brake::cruise(v)
+        } else {
+            return None;
+        };
+        // Within the look ahead's rounding of the junction (it counts a
+        // cap met 1e-9 mm late).
+        if aim.length() > (at - from) * (1.0 + ROUNDING) + 1e-9 {
+            return None;
+        }
+        self.check(from, &aim, at).ok()?;
+        Some((aim, at))
+    }
+
+    /// Where the segment `from` mm ahead lies in ends, mm ahead (the next
+    /// one's, if it ends there within rounding).
+    fn end_of_segment_at(&self, from: f64) -> Option<f64> {
+        self.segments()
+            .map_while(|(start, seg)| seg.map(|s| start + s.length))
+            .find(|&end| end > from + AT_REST)
+    }
+
     /// The lowest acceleration and jerk limits of the segments touching
     /// `from`..`to` mm ahead.
     fn lowest_limits(&self, from: f64, to: f64) -> (f64, f64) {
@@ -318,7 +392,8 @@ impl Path<'_> {
             if start >= to - AT_REST && start > from {
                 break;
             }
-            if start + seg.length >= from {
+            // One ending where the stretch starts is behind it.
+            if start + seg.length > from {
                 amax = amax.min(seg.max_acceleration);
                 jmax = jmax.min(seg.max_jerk);
             }
@@ -515,6 +590,15 @@ impl Path<'_> {
                 }
             }
             if lo < ramps {
+                // Over a segment's limits: where the profile entered it, a
+                // chain may aim at its junction instead.
+                let over = || match before {
+                    Some(b) if start >= from => Miss::Limits {
+                        at: start,
+                        cap: b.exit_velocity.min(seg.max_velocity),
+                    },
+                    _ => Miss::Other,
+                };
                 // |a| is monotone within each phase: its largest on the
                 // segment is at an end, or the peak where the first phase
                 // ends or the second runs.
@@ -524,7 +608,7 @@ impl Path<'_> {
                         most = most.max(peak);
                     }
                     if most > seg.max_acceleration * slack {
-                        return Err(Miss::Other);
+                        return Err(over());
                     }
                 }
                 if seg.max_jerk < j_most * slack {
@@ -532,7 +616,7 @@ impl Path<'_> {
                     for (i, phase) in brake.phases.iter().enumerate() {
                         let overlaps = ends[i] > lo && phase_from < hi && phase.1 > 0.0;
                         if overlaps && phase.0.abs() > seg.max_jerk * slack {
-                            return Err(Miss::Other);
+                            return Err(over());
                         }
                         phase_from = ends[i];
                     }
