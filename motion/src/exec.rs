@@ -3142,9 +3142,14 @@ mod simulation {
     fn braking_into_a_slow_blend_uses_the_lines_limits() {
         // (first braking sample, first sample of line 3 or at rest).
         let braking = |mode: &str| {
-            let mut q = planned(
+            // Blended, as stopping there is quicker
+            // (`a_corner_stops_where_that_is_quicker_than_its_blend`).
+            let mut q = planned_with(
                 &format!("{mode}\nG1 X20 F6000\nY20\nM2\n"),
-                PathMode::ExactPath,
+                PlannerConfig {
+                    stop_when_quicker: false,
+                    ..Default::default()
+                },
             );
             let samples = run(&mut q, |_, _| {});
             let (v, a, j) = limit_use(&samples);
@@ -3163,6 +3168,43 @@ mod simulation {
         assert!(
             blended <= 1.1 * stopped,
             "braking into the blend {blended} s, to a stop {stopped} s"
+        );
+    }
+
+    /// Under G64 the planner stops at a corner where that is quicker than
+    /// its blend: a 90° zig-zag of 20 mm lines takes no longer with
+    /// `G64 P0.01` than with exact stops (`G61.1`; blended it took 6 %
+    /// longer), while a 30° one of 0.5 mm lines, whose blends pay, stays
+    /// blended and quicker than stopping.
+    #[test]
+    fn a_corner_stops_where_that_is_quicker_than_its_blend() {
+        let zigzag = |mode: &str, turn: f64, length: f64| {
+            let half = (turn / 2.0).to_radians();
+            let mut text = format!("{mode}\nG1 F3000\n");
+            let (mut x, mut y) = (0.0, 0.0);
+            for k in 0..12 {
+                x += length * half.cos();
+                y += length * half.sin() * if k % 2 == 0 { 1.0 } else { -1.0 };
+                text += &format!("X{x:.4} Y{y:.4}\n");
+            }
+            let mut q = planned(&(text + "M2\n"), PathMode::ExactPath);
+            let samples = run(&mut q, |_, _| {});
+            let (v, a, j) = limit_use(&samples);
+            assert!(
+                v.max(a).max(j) <= 1.0 + 1e-6,
+                "{mode}: limit use {v} {a} {j}"
+            );
+            samples.len() as f64 * PERIOD
+        };
+        let (blended, stopped) = (zigzag("G64 P0.01", 90.0, 20.0), zigzag("G61.1", 90.0, 20.0));
+        assert!(
+            blended <= stopped + 0.002,
+            "90°: G64 {blended} s, G61.1 {stopped} s"
+        );
+        let (blended, stopped) = (zigzag("G64 P0.01", 30.0, 0.5), zigzag("G61.1", 30.0, 0.5));
+        assert!(
+            blended < 0.95 * stopped,
+            "30°: G64 {blended} s, G61.1 {stopped} s"
         );
     }
 
@@ -3592,12 +3634,18 @@ mod simulation {
     /// segment is a 90° blend with an acceleration limit of 53 mm/s²), so
     /// the jerk search took over from the profile and entered the blend
     /// decelerating past its limit (jerk 1.7 times the limit). The stop
-    /// already playing is now kept as the hold's stop.
+    /// already playing is now kept as the hold's stop. (The planner now
+    /// stops at that corner instead, which is quicker: blended here as
+    /// the case was found.)
     #[test]
     fn a_hold_during_a_stop_keeps_that_stop_where_no_shortest_stop_fits() {
-        let mut q = planned(
+        let mut q = planned_with(
             &circle_of_chords(300, 3000.0),
-            PathMode::Blend { tolerance: 0.01 },
+            PlannerConfig {
+                mode: PathMode::Blend { tolerance: 0.01 },
+                stop_when_quicker: false,
+                ..Default::default()
+            },
         );
         let out = run(&mut q, |k, ex| {
             ex.set_feed_override(if (40..600).contains(&k) { 0.0 } else { 1.0 });

@@ -234,6 +234,12 @@ pub struct PlannerConfig {
     /// it comes faster. The planner then holds back a few hundred more
     /// lines before releasing segments (until the program ends or stops).
     pub blend_worker: bool,
+    /// Under G64, stop at a corner between two lines instead of blending
+    /// it where that is quicker (a sharp corner under a small tolerance,
+    /// whose blend is passed at a few mm/s). The stop is on the
+    /// programmed corner, within any tolerance. Off, every corner up to
+    /// 150° that fits a blend is blended.
+    pub stop_when_quicker: bool,
 }
 
 impl Default for PlannerConfig {
@@ -250,6 +256,7 @@ impl Default for PlannerConfig {
             digital_inputs: MAX_DIGITAL_OUTPUTS,
             analog_inputs: MAX_ANALOG_OUTPUTS,
             blend_worker: true,
+            stop_when_quicker: true,
         }
     }
 }
@@ -1842,15 +1849,66 @@ impl<'k> Planner<'k> {
                     continue;
                 }
             }
-            let Some(chosen) = self.choose_blend(both_lines) else {
-                // No blend here, or none fits: stop (or go straight on) at
-                // the corner.
+            let Some(chosen) = self
+                .choose_blend(both_lines)
+                .filter(|c| !(self.config.stop_when_quicker && self.stops_sooner(c)))
+            else {
+                // No blend here, or none fits, or stopping is quicker: stop
+                // (or go straight on) at the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
                 self.release_front(exit);
                 continue;
             };
             self.blend_corner(chosen);
         }
+    }
+
+    /// Whether stopping at the corner between the first two waiting lines
+    /// is quicker than the blend `chosen` through it. Not on a dense curve
+    /// (a blend taking half a line), only where both lines keep a stretch
+    /// of their own. A blend saves the ramps from and to its speed v on
+    /// either side, at most 2·τ(v) with τ the jerk-limited time from rest
+    /// to v under the lines' axis limits, and the corner it cuts at the
+    /// feed; it costs its length at v. Through a sharp corner under a small
+    /// tolerance v is a few mm/s, and the blend took longer than the stop
+    /// (a 90° zig-zag of 20 mm lines on mill3 at P0.01: 8.45 s against
+    /// 8.00 s with G61.1).
+    fn stops_sooner(&self, chosen: &Chosen) -> bool {
+        let (a, b) = (&self.pending[0], &self.pending[1]);
+        let (Some(pa), Some(pb)) = (a.programmed(), b.programmed()) else {
+            return false;
+        };
+        let (legs_a, legs_b) = chosen.legs;
+        if legs_a >= 0.999 * pa.length / 2.0 || legs_b >= 0.999 * pb.length / 2.0 {
+            return false;
+        }
+        let (blend, extremes) = &chosen.blend;
+        let shape = Shape::Blend(*blend);
+        let length = shape.length();
+        let (v_blend, _, _) = self.path_limits(&shape, length, Some(extremes));
+        let feed = a.segment.feed.min(b.segment.feed);
+        // The lines' acceleration and jerk along their directions, axes
+        // only (joint limits only lower them, which favours the blend).
+        let (mut amax, mut jmax) = (f64::INFINITY, f64::INFINITY);
+        for p in [pa, pb] {
+            for (i, l) in self.limits.iter().enumerate() {
+                if let (Some(l), true) = (l, p.direction[i] != 0.0) {
+                    amax = amax.min(l.max_acceleration / p.direction[i].abs());
+                    jmax = jmax.min(l.max_jerk / p.direction[i].abs());
+                }
+            }
+        }
+        let v = v_blend.min(feed);
+        if !(v > 0.0 && amax.is_finite() && jmax.is_finite()) {
+            return false;
+        }
+        let ramp = if v * jmax < amax * amax {
+            2.0 * (v / jmax).sqrt()
+        } else {
+            v / amax + amax / jmax
+        };
+        let cut = (legs_a + legs_b - length).max(0.0) / feed;
+        length / v > 2.0 * ramp + cut
     }
 
     /// Trim the first two waiting moves (lines or arcs) by the chosen
