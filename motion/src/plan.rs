@@ -274,6 +274,9 @@ struct Chosen {
     /// X Y Z of the point, unit tangent and curvature it ends with on the
     /// second move (the start of the next blend if that takes the rest).
     end: FrameXyz,
+    /// Its path limits (speed, acceleration, jerk), once worked out
+    /// ([`Planner::stops_sooner`] needs them first).
+    limits: Option<(f64, f64, f64)>,
 }
 
 impl Chosen {
@@ -283,6 +286,7 @@ impl Chosen {
             legs,
             blend: Blend::sampled(*control),
             end: xyz_frame(end),
+            limits: None,
         }
     }
 
@@ -292,6 +296,7 @@ impl Chosen {
             legs,
             blend: *sampled,
             end,
+            limits: None,
         }
     }
 }
@@ -1849,10 +1854,16 @@ impl<'k> Planner<'k> {
                     continue;
                 }
             }
-            let Some(chosen) = self
-                .choose_blend(both_lines)
-                .filter(|c| !(self.config.stop_when_quicker && self.stops_sooner(c)))
-            else {
+            let chosen = self.choose_blend(both_lines).and_then(|mut c| {
+                if self.config.stop_when_quicker {
+                    let (stops, limits) = self.stops_sooner(&c);
+                    c.limits = limits;
+                    (!stops).then_some(c)
+                } else {
+                    Some(c)
+                }
+            });
+            let Some(chosen) = chosen else {
                 // No blend here, or none fits, or stopping is quicker: stop
                 // (or go straight on) at the corner.
                 let exit = self.junction(&self.pending[0], &self.pending[1]);
@@ -1873,19 +1884,21 @@ impl<'k> Planner<'k> {
     /// tolerance v is a few mm/s, and the blend took longer than the stop
     /// (a 90° zig-zag of 20 mm lines on mill3 at P0.01: 8.45 s against
     /// 8.00 s with G61.1).
-    fn stops_sooner(&self, chosen: &Chosen) -> bool {
+    /// Also the blend's path limits, where it worked them out.
+    fn stops_sooner(&self, chosen: &Chosen) -> (bool, Option<(f64, f64, f64)>) {
         let (a, b) = (&self.pending[0], &self.pending[1]);
         let (Some(pa), Some(pb)) = (a.programmed(), b.programmed()) else {
-            return false;
+            return (false, None);
         };
         let (legs_a, legs_b) = chosen.legs;
         if legs_a >= 0.999 * pa.length / 2.0 || legs_b >= 0.999 * pb.length / 2.0 {
-            return false;
+            return (false, None);
         }
         let (blend, extremes) = &chosen.blend;
         let shape = Shape::Blend(*blend);
         let length = shape.length();
-        let (v_blend, _, _) = self.path_limits(&shape, length, Some(extremes));
+        let limits = self.path_limits(&shape, length, Some(extremes));
+        let v_blend = limits.0;
         let feed = a.segment.feed.min(b.segment.feed);
         // The lines' acceleration and jerk along their directions, axes
         // only (joint limits only lower them, which favours the blend).
@@ -1900,7 +1913,7 @@ impl<'k> Planner<'k> {
         }
         let v = v_blend.min(feed);
         if !(v > 0.0 && amax.is_finite() && jmax.is_finite()) {
-            return false;
+            return (false, Some(limits));
         }
         let ramp = if v * jmax < amax * amax {
             2.0 * (v / jmax).sqrt()
@@ -1908,7 +1921,7 @@ impl<'k> Planner<'k> {
             v / amax + amax / jmax
         };
         let cut = (legs_a + legs_b - length).max(0.0) / feed;
-        length / v > 2.0 * ramp + cut
+        (length / v > 2.0 * ramp + cut, Some(limits))
     }
 
     /// Trim the first two waiting moves (lines or arcs) by the chosen
@@ -1959,8 +1972,15 @@ impl<'k> Planner<'k> {
             SegmentKind::Feed
         };
         let (shape, extremes) = chosen.blend;
-        let mut blend =
-            self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes));
+        let mut blend = match chosen.limits {
+            Some((v, a, j)) => Segment {
+                max_velocity: v,
+                max_acceleration: a,
+                max_jerk: j,
+                ..self.segment_unlimited(kind, b_line_number, Shape::Blend(shape))
+            },
+            None => self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes)),
+        };
         blend.feed = a_feed.min(b_feed);
         // The blend starts move b, so it carries b's force setting, not
         // whatever the program has set since.
