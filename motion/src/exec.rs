@@ -545,9 +545,13 @@ impl Brake {
         }
     }
 
-    /// The time at which the profile has gone `distance`, within its ramps
-    /// (at a positive speed the distance rises with time).
+    /// The time at which the profile has gone `distance` (at a positive
+    /// speed the distance rises with time; past the ramps it holds v1).
     fn time_at_distance(&self, distance: f64) -> f64 {
+        let ramps = self.length();
+        if distance >= ramps {
+            return self.duration() + (distance - ramps) / self.v1;
+        }
         narrow(0.0, self.duration(), 60, |t| self.at(t).0 <= distance).0
     }
 }
@@ -1010,7 +1014,8 @@ impl Executor {
                         // the next segment: eased at a jerk that leaves at
                         // most that segment's acceleration limit a period
                         // before, it never enters it too hard.
-                        let j_arrive = jmax.min(jn.max(an / self.period));
+                        let j_ease = jn.max(an / self.period);
+                        let j_arrive = jmax.min(j_ease);
                         let arrives = if a > 0.0 {
                             // Still speeding up, the search eases that off
                             // in constant-jerk periods, each under the
@@ -1024,7 +1029,7 @@ impl Executor {
                         };
                         let settles = limit >= crest
                             || arrives
-                            || met.is_some_and(|m| m.meets(limit, dist, jn.max(an / self.period)))
+                            || met.is_some_and(|m| m.meets(limit, dist, j_ease))
                             || excepted(dist, limit);
                         if settles {
                             met = Some(Met::at(dist, limit));
@@ -1540,23 +1545,20 @@ impl Executor {
             a = 0.0;
         }
         if within {
-            self.commit(q, head, ds, v, a, consumed)
+            let crosses = self.crosses_within_caps(q, head, ds, v, a);
+            self.commit(q, head, ds, v, a, crosses, consumed)
         } else {
             self.follow_guard(q, head, ds, v, a, consumed)
         }
     }
 
     /// Takes the state `ds` further on at speed `v` and acceleration `a` if
-    /// a guard from it exists (`guard.rs`); otherwise follows the guard.
-    fn commit(&mut self, q: View, head: usize, ds: f64, v: f64, a: f64, consumed: &mut usize) {
-        let crosses = self.crosses_within_caps(q, head, ds, v, a);
-        self.commit_crossing(q, head, ds, v, a, crosses, consumed)
-    }
-
-    /// [`commit`](Self::commit), told whether the step crosses every
-    /// junction within its cap.
+    /// the step crosses every junction within its cap (`crosses`, from
+    /// [`crosses_within_caps`](Self::crosses_within_caps) or a profile's own
+    /// speeds) and a guard from it exists (`guard.rs`); otherwise follows
+    /// the guard.
     #[allow(clippy::too_many_arguments)]
-    fn commit_crossing(
+    fn commit(
         &mut self,
         q: View,
         head: usize,
@@ -1863,7 +1865,7 @@ impl Executor {
                 let (t, _) = narrow(t0, brake.t, 60, |t| brake.at(t).0 - s0 <= d);
                 brake.at(t).1
             });
-            self.commit_crossing(q, head, s1 - s0, v, a, crosses, consumed)
+            self.commit(q, head, s1 - s0, v, a, crosses, consumed)
         } else {
             self.follow_guard(q, head, s1 - s0, v, a, consumed)
         }

@@ -165,7 +165,9 @@ impl Guard {
             // after it harder than that segment allows: aim at its cap
             // under the limits before it, arriving with zero acceleration,
             // and go on from there.
-            if let Some((aim, at)) = miss.and_then(|(at, cap)| path.aim(from, v, a, at, cap)) {
+            if let Some((aim, at)) =
+                miss.and_then(|(at, cap)| Some((path.aim(from, v, a, at, cap)?, at)))
+            {
                 guard.legs[guard.n] = Leg {
                     brake: aim,
                     start,
@@ -194,11 +196,7 @@ impl Guard {
                 return Some(guard);
             }
             path.check(from, &brake, end).ok()?;
-            let t = if a == 0.0 {
-                (end - from) / v
-            } else {
-                brake.time_at_distance(end - from)
-            };
+            let t = brake.time_at_distance(end - from);
             let (_, v_end, a_end) = brake.at(t);
             if v_end <= 0.0 {
                 return None;
@@ -349,9 +347,9 @@ impl Path<'_> {
     /// A profile from (`v`, `a`) `from` mm ahead that arrives at the
     /// junction `at` mm ahead, under the limits before it, no faster than
     /// its `cap` (and, braking already, no faster than easing that off at
-    /// once leaves) with zero acceleration, checked; and where it leaves
-    /// off. Cruising below the cap, it holds the speed.
-    fn aim(&self, from: f64, v: f64, a: f64, at: f64, cap: f64) -> Option<(Brake, f64)> {
+    /// once leaves) with zero acceleration, checked. Cruising below the
+    /// cap, it holds the speed.
+    fn aim(&self, from: f64, v: f64, a: f64, at: f64, cap: f64) -> Option<Brake> {
         if cap <= 0.0 || at <= from {
             return None;
         }
@@ -370,7 +368,7 @@ impl Path<'_> {
             return None;
         }
         self.check(from, &aim, at).ok()?;
-        Some((aim, at))
+        Some(aim)
     }
 
     /// Where the segment `from` mm ahead lies in ends, mm ahead (the next
