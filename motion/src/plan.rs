@@ -1026,6 +1026,65 @@ impl FitWindow {
     }
 }
 
+/// Shortest time, s, over a line of `length` mm entered and left at speed
+/// `at` mm/s with no acceleration, under top speed `top` mm/s,
+/// acceleration `accel` mm/s² and jerk `jerk` mm/s³ (infinite for
+/// trapezoidal profiles): the S-curve up by Δ and back down again, with Δ
+/// the most the length allows, and a cruise at `top` if it is reached.
+///
+/// Up by Δ and down takes 2·τ(Δ) over (2·at + Δ)·τ(Δ), τ(Δ) = Δ/A + A/J
+/// once the ramp reaches A (Δ ≥ A²/J), else 2·√(Δ/J); the length fixes Δ
+/// through a quadratic or, below A, a cubic in √Δ with one real root.
+fn line_time(length: f64, at: f64, top: f64, accel: f64, jerk: f64) -> f64 {
+    let u = at.min(top).max(0.0);
+    if length <= 0.0 {
+        return 0.0;
+    }
+    // Speed change below which the ramp never reaches the acceleration
+    // limit (0 for trapezoidal profiles).
+    let knee = accel * accel / jerk;
+    let ramp = |dv: f64| {
+        if dv >= knee {
+            dv / accel + accel / jerk
+        } else {
+            2.0 * (dv / jerk).sqrt()
+        }
+    };
+    let most = top - u;
+    let reach = (2.0 * u + most) * ramp(most);
+    if reach <= length {
+        return 2.0 * ramp(most) + (length - reach) / top;
+    }
+    let dv = if length <= (2.0 * u + knee) * ramp(knee) {
+        // (2·u + x²)·2·x/√J = length with x = √Δ: x³ + p·x = c, p ≥ 0,
+        // one real root. Both c^(1/3) and c/p lie above it, and within
+        // 2^(1/3) of it at worst; the cubic is convex there, so Newton
+        // steps from the lower of them fall onto it.
+        let (p, c) = (2.0 * u, length * jerk.sqrt() / 2.0);
+        // The cube root's exponent and leading bits from the float's
+        // bits (within 4 %): one Newton step less than starting from
+        // c/p alone, and no library cube root (slow, and planning runs
+        // this at every sharp corner).
+        let guess = f64::from_bits(c.to_bits() / 3 + 0x2A9F_7893_782D_A1CE);
+        let mut x = if p > 0.0 { guess.min(c / p) } else { guess };
+        for _ in 0..8 {
+            let step = (x * (x * x + p) - c) / (3.0 * x * x + p);
+            x -= step;
+            if step.abs() <= 1e-12 * x {
+                break;
+            }
+        }
+        x * x
+    } else {
+        // (2·u + Δ)·(Δ/A + A/J) = length: Δ²/A + b·Δ + k = 0 with k < 0,
+        // its positive root in the form that does not cancel.
+        let b = accel / jerk + 2.0 * u / accel;
+        let k = 2.0 * u * accel / jerk - length;
+        -2.0 * k / (b + (b * b - 4.0 * k / accel).sqrt())
+    };
+    2.0 * ramp(dv.min(most))
+}
+
 /// Bounds on |dp_i/ds|, |d²p_i/ds²| and |d³p_i/ds³| of either plane axis
 /// along an arc `length` mm long: a circle or helix, or a spiral whose
 /// radius changes in the program's rounding (or up to the interpreter's
@@ -1877,51 +1936,69 @@ impl<'k> Planner<'k> {
     /// Whether stopping at the corner between the first two waiting lines
     /// is quicker than the blend `chosen` through it. Not on a dense curve
     /// (a blend taking half a line), only where both lines keep a stretch
-    /// of their own. A blend saves the ramps from and to its speed v on
-    /// either side, at most 2·τ(v) with τ the jerk-limited time from rest
-    /// to v under the lines' axis limits, and the corner it cuts at the
-    /// feed; it costs its length at v. Through a sharp corner under a small
-    /// tolerance v is a few mm/s, and the blend took longer than the stop
-    /// (a 90° zig-zag of 20 mm lines on mill3 at P0.01: 8.45 s against
-    /// 8.00 s with G61.1).
-    /// Also the blend's path limits, where it worked them out.
-    fn stops_sooner(&self, chosen: &Chosen) -> (bool, Option<(f64, f64, f64)>) {
-        let (a, b) = (&self.pending[0], &self.pending[1]);
-        let (Some(pa), Some(pb)) = (a.programmed(), b.programmed()) else {
+    /// of their own. Through a sharp corner under a small tolerance the
+    /// blend's speed limit v is a few mm/s, and the ramps down to v and up
+    /// from it take nearly as long as those to and from rest: a
+    /// jerk-limited ramp ends in A/J of easing whatever speed it ends at.
+    /// The comparison is [`line_time`] for both: each line taken as if
+    /// the corner at its other end were alike (as on a zig-zag), half of
+    /// its time charged to this corner. Also the blend's path limits,
+    /// where it worked them out; the lines' limits stay on the waiting
+    /// lines for [`release_front`](Self::release_front).
+    fn stops_sooner(&mut self, chosen: &Chosen) -> (bool, Option<(f64, f64, f64)>) {
+        let (Some(pa), Some(pb)) = (self.pending[0].programmed(), self.pending[1].programmed())
+        else {
             return (false, None);
         };
+        let (length_a, length_b) = (pa.length, pb.length);
         let (legs_a, legs_b) = chosen.legs;
-        if legs_a >= 0.999 * pa.length / 2.0 || legs_b >= 0.999 * pb.length / 2.0 {
+        if legs_a >= 0.999 * length_a / 2.0 || legs_b >= 0.999 * length_b / 2.0 {
             return (false, None);
         }
         let (blend, extremes) = &chosen.blend;
         let shape = Shape::Blend(*blend);
         let length = shape.length();
         let limits = self.path_limits(&shape, length, Some(extremes));
-        let v_blend = limits.0;
-        let feed = a.segment.feed.min(b.segment.feed);
-        // The lines' acceleration and jerk along their directions, axes
-        // only (joint limits only lower them, which favours the blend).
-        let (mut amax, mut jmax) = (f64::INFINITY, f64::INFINITY);
-        for p in [pa, pb] {
-            for (i, l) in self.limits.iter().enumerate() {
-                if let (Some(l), true) = (l, p.direction[i] != 0.0) {
-                    amax = amax.min(l.max_acceleration / p.direction[i].abs());
-                    jmax = jmax.min(l.max_jerk / p.direction[i].abs());
-                }
-            }
-        }
-        let v = v_blend.min(feed);
-        if !(v > 0.0 && amax.is_finite() && jmax.is_finite()) {
+        let feed = self.pending[0]
+            .segment
+            .feed
+            .min(self.pending[1].segment.feed);
+        let v = limits.0.min(feed);
+        // A blend the motion cannot pass (v zero or NaN) is left to the
+        // planner's other checks.
+        let (Some(la), Some(lb), true) = (self.line_limits(0), self.line_limits(1), v > 0.0) else {
             return (false, Some(limits));
-        }
-        let ramp = if v * jmax < amax * amax {
-            2.0 * (v / jmax).sqrt()
-        } else {
-            v / amax + amax / jmax
         };
-        let cut = (legs_a + legs_b - length).max(0.0) / feed;
-        (length / v > 2.0 * ramp + cut, Some(limits))
+        let line = |length: f64, l: (f64, f64, f64), at: f64| {
+            let jerk = if self.config.jerk_limited {
+                l.2
+            } else {
+                f64::INFINITY
+            };
+            line_time(length, at, l.0.min(feed), l.1, jerk)
+        };
+        let stop = (line(length_a, la, 0.0) + line(length_b, lb, 0.0)) / 2.0;
+        let through = (line(length_a - 2.0 * legs_a, la, v) + line(length_b - 2.0 * legs_b, lb, v))
+            / 2.0
+            + length / v;
+        (through > stop, Some(limits))
+    }
+
+    /// The path limits of waiting line `k` as programmed, worked out once
+    /// and kept on it (a trimmed line keeps them: they hold on the whole).
+    fn line_limits(&mut self, k: usize) -> Option<(f64, f64, f64)> {
+        let p = &self.pending[k];
+        let programmed = p.programmed()?;
+        if p.segment.max_velocity.is_nan() {
+            let (v, a, j) =
+                self.path_limits(&Shape::Line(programmed.line), programmed.length, None);
+            let segment = &mut self.pending[k].segment;
+            segment.max_velocity = v;
+            segment.max_acceleration = a;
+            segment.max_jerk = j;
+        }
+        let s = &self.pending[k].segment;
+        Some((s.max_velocity, s.max_acceleration, s.max_jerk))
     }
 
     /// Trim the first two waiting moves (lines or arcs) by the chosen
@@ -2659,17 +2736,23 @@ mod tests {
     /// On a machine whose joints are its axes the travel is a box. Lines
     /// that run into quarter arcs starting on the edge of the travel (at
     /// X1000, heading +Y): the blends' control polygons stick out past the
-    /// edge there, the blends do not, and every corner still blends.
+    /// edge there, the blends do not, and every corner still blends (the
+    /// rapid's too: stopping there is quicker, but it is the shapes under
+    /// test here).
     #[test]
     fn corners_on_the_edge_of_the_travel_still_blend_inside_it() {
         let k = xyz(100.0, 1000.0, 50_000.0);
+        let config = PlannerConfig {
+            stop_when_quicker: false,
+            ..PlannerConfig::default()
+        };
         let mut text = "G21 G90 G64 P0.05\nG0 X990 Y0\nG1 F3000\n".to_string();
         for n in 0..5 {
             let y = 20.0 * n as f64;
             text += &format!("X1000 Y{}\nG3 X990 Y{} I-10 J0\nG1\n", y + 10.0, y + 20.0);
         }
         text += "M2\n";
-        let segs = plan(&k, PlannerConfig::default(), &text);
+        let segs = plan(&k, config, &text);
         let blends = segs
             .iter()
             .filter(|s| matches!(s.shape, Shape::Blend(_)))
@@ -2885,6 +2968,87 @@ mod tests {
             s.max_velocity
         );
         assert!(s.max_acceleration <= 500.0 + 1e-9);
+    }
+
+    /// `line_time` against a simulation: the speed taken up from `at` and
+    /// back down again by integrating the jerk-limited ramp in steps of
+    /// at most 10 µs (full jerk until the acceleration limit, easing off at
+    /// full jerk from the step where what is left of the speed change
+    /// equals a²/2J, found within its step), the peak found by bisection on
+    /// the distance, a cruise at the top speed where the length leaves one.
+    /// Short lines that never reach the acceleration limit, long ones that
+    /// do, ones that cruise; from rest and from a blend's speed; and
+    /// trapezoidal profiles (no jerk limit).
+    #[test]
+    fn line_time_matches_a_simulated_s_curve() {
+        const STEP: f64 = 1e-5;
+        // Time and distance to raise the speed by dv from `at`, starting
+        // and ending with no acceleration.
+        let ramp = |at: f64, dv: f64, accel: f64, jerk: f64| {
+            if jerk.is_infinite() {
+                return (dv / accel, (2.0 * at + dv) / 2.0 * dv / accel);
+            }
+            let (mut t, mut d, mut v, mut a) = (0.0, 0.0, at, 0.0f64);
+            let mut easing = false;
+            loop {
+                let left = at + dv - v;
+                let (j, h) = if easing {
+                    (-jerk, STEP.min(a / jerk))
+                } else {
+                    // Where easing must start within the step: from a,
+                    // left − a·h − ½·j·h² = (a + j·h)²/2J.
+                    let (j, h, switch) = if a < accel {
+                        let switch = ((a * a / 2.0 + jerk * left).sqrt() - a) / jerk;
+                        (jerk, STEP.min((accel - a) / jerk), switch)
+                    } else {
+                        (0.0, STEP, (left - accel * accel / (2.0 * jerk)) / accel)
+                    };
+                    if switch <= h {
+                        easing = true;
+                        (j, switch.max(0.0))
+                    } else {
+                        (j, h)
+                    }
+                };
+                if easing && h <= 0.0 && a <= 0.0 {
+                    return (t, d);
+                }
+                d += v * h + a * h * h / 2.0 + j * h * h * h / 6.0;
+                v += a * h + j * h * h / 2.0;
+                a += j * h;
+                t += h;
+            }
+        };
+        let simulated = |length: f64, at: f64, top: f64, accel: f64, jerk: f64| {
+            let (t, d) = ramp(at, top - at, accel, jerk);
+            if 2.0 * d <= length {
+                return 2.0 * t + (length - 2.0 * d) / top;
+            }
+            let (mut lo, mut hi) = (0.0, top - at);
+            for _ in 0..40 {
+                let mid = (lo + hi) / 2.0;
+                if 2.0 * ramp(at, mid, accel, jerk).1 > length {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            2.0 * ramp(at, lo, accel, jerk).0
+        };
+        for jerk in [75_000.0, f64::INFINITY] {
+            for at in [0.0, 7.7, 25.0] {
+                for length in [0.05, 0.5, 3.0, 50.0] {
+                    let (top, accel) = (50.0, 1500.0);
+                    let want = simulated(length, at, top, accel, jerk);
+                    let got = line_time(length, at, top, accel, jerk);
+                    assert!(
+                        (got - want).abs() <= 1e-6 * want,
+                        "{length} mm from {at} mm/s, jerk {jerk}: {got} s, simulated {want} s"
+                    );
+                }
+            }
+        }
+        assert_eq!(line_time(0.0, 10.0, 50.0, 1500.0, 75_000.0), 0.0);
     }
 
     /// `arc_extremes` bounds the first three derivatives of the plane
