@@ -1913,15 +1913,16 @@ impl<'k> Planner<'k> {
                     continue;
                 }
             }
-            let chosen = self.choose_blend(both_lines).and_then(|mut c| {
-                if self.config.stop_when_quicker {
-                    let (stops, limits) = self.stops_sooner(&c);
-                    c.limits = limits;
-                    (!stops).then_some(c)
-                } else {
-                    Some(c)
+            // Decided in place: a blend is a few hundred bytes, and its
+            // copies showed in profiles.
+            let mut chosen = self.choose_blend(both_lines);
+            if let (Some(c), true) = (&mut chosen, self.config.stop_when_quicker) {
+                let (stops, limits) = self.stops_sooner(c);
+                c.limits = limits;
+                if stops {
+                    chosen = None;
                 }
-            });
+            }
             let Some(chosen) = chosen else {
                 // No blend here, or none fits, or stopping is quicker: stop
                 // (or go straight on) at the corner.
