@@ -2295,6 +2295,18 @@ mod simulation {
         limit_use_of(samples, PERIOD, &LIMITS)
     }
 
+    /// Asserts that `samples` (from [`run`]) keep every axis within
+    /// [`LIMITS`] (1e-6 for rounding), naming `what` if not; returns the
+    /// largest velocity, acceleration and jerk use.
+    fn assert_within_limits(samples: &[Sample], what: &str) -> (f64, f64, f64) {
+        let (v, a, j) = limit_use(samples);
+        assert!(
+            v.max(a).max(j) <= 1.0 + 1e-6,
+            "{what}: limit use: velocity {v}, acceleration {a}, jerk {j}"
+        );
+        (v, a, j)
+    }
+
     /// Largest velocity, acceleration and jerk of any axis over
     /// `samples` taken every `dt` from the origin, as fractions of
     /// `limits`.
@@ -2787,11 +2799,7 @@ mod simulation {
             );
             let time = out.len() as f64 * PERIOD;
             assert!(time < length / speed + 0.05, "F{feed}: {time} s");
-            let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "F{feed}: limit use {v} {a} {j}"
-            );
+            assert_within_limits(&out, &format!("F{feed}"));
         }
     }
 
@@ -3184,11 +3192,7 @@ mod simulation {
                 },
             );
             let samples = run(&mut q, |_, _| {});
-            let (v, a, j) = limit_use(&samples);
-            assert!(
-                v.max(a).max(j) <= 1.0 + 1e-6,
-                "{mode}: limit use {v} {a} {j}"
-            );
+            assert_within_limits(&samples, mode);
             let start = samples.iter().position(|s| s.acceleration < 0.0).unwrap();
             let end = samples
                 .iter()
@@ -3218,8 +3222,7 @@ mod simulation {
         for length in [0.05, 0.2, 0.5] {
             let mut q = planned(&format!("G1 F6000 X{length}\nM2\n"), PathMode::ExactStop);
             let samples = run(&mut q, |_, _| {});
-            let (v, a, j) = limit_use(&samples);
-            assert!(v.max(a).max(j) <= 1.0 + 1e-6, "limit use {v} {a} {j}");
+            assert_within_limits(&samples, &format!("{length} mm"));
             let moving = samples.iter().filter(|s| s.velocity > 0.0).count() as f64 * PERIOD;
             let least = 4.0 * (length / (2.0 * LIMITS.max_jerk)).cbrt();
             assert!(
@@ -3256,11 +3259,7 @@ mod simulation {
                 .filter(|s| matches!(s.shape, crate::path::Shape::Blend(_)))
                 .count();
             let samples = run(&mut q, |_, _| {});
-            let (v, a, j) = limit_use(&samples);
-            assert!(
-                v.max(a).max(j) <= 1.0 + 1e-6,
-                "{mode}: limit use {v} {a} {j}"
-            );
+            assert_within_limits(&samples, mode);
             (samples.len() as f64 * PERIOD, blends)
         };
         for (turn, length) in [(90.0, 20.0), (30.0, 3.2)] {
@@ -3342,11 +3341,7 @@ mod simulation {
             let out = run(&mut q, |k, ex| {
                 ex.set_hold((hold_at..hold_at + 300).contains(&k));
             });
-            let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "hold at tick {hold_at}: v {v} a {a} j {j}"
-            );
+            assert_within_limits(&out, &format!("hold at tick {hold_at}"));
             let (moving, rest) = (out[hold_at], out[hold_at + 250]);
             assert!(moving.velocity > 40.0, "cutting at {}", moving.velocity);
             assert_eq!(rest.velocity, 0.0, "held at rest");
@@ -3606,11 +3601,7 @@ mod simulation {
                     ex.set_single_block(false);
                 }
             });
-            let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "single block at tick {on_at}: v {v} a {a} j {j}"
-            );
+            assert_within_limits(&out, &format!("single block at tick {on_at}"));
             assert!(
                 out[on_at].velocity > 40.0,
                 "cutting at {}",
@@ -3662,11 +3653,7 @@ mod simulation {
                     1.0
                 });
             });
-            let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "0 % at tick {at}: v {v} a {a} j {j}"
-            );
+            assert_within_limits(&out, &format!("0 % at tick {at}"));
             assert!(out[at].velocity > 40.0, "cutting at {}", out[at].velocity);
             assert_eq!(out[at + 250].velocity, 0.0, "at rest under 0 %");
             let end = out.last().unwrap().position;
@@ -3692,11 +3679,7 @@ mod simulation {
             // The operated circle sweep's operators that found it.
             let mut operator = Operator::new(seed * 7919 + 1000, 150.0);
             let out = run(&mut q, |k, ex| operator.act(k, ex));
-            let (v, a, j) = limit_use(&out);
-            assert!(
-                v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-                "operator {seed}: v {v} a {a} j {j}"
-            );
+            let (v, _, _) = assert_within_limits(&out, &format!("operator {seed}"));
             assert!(v > 0.9999, "rides the limit: {v}");
         }
     }
@@ -3724,11 +3707,7 @@ mod simulation {
             ex.set_feed_override(if (40..600).contains(&k) { 0.0 } else { 1.0 });
             ex.set_hold((312..407).contains(&k));
         });
-        let (v, a, j) = limit_use(&out);
-        assert!(
-            v <= 1.0 + 1e-6 && a <= 1.0 + 1e-6 && j <= 1.0 + 1e-6,
-            "v {v} a {a} j {j}"
-        );
+        assert_within_limits(&out, "a hold under a 0 % override");
         // At rest on the rapid's line, where it meets the blend into the
         // circle (0.032 mm short of the corner), under the hold and the 0 %.
         let rest = out[450].position;
