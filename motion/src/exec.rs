@@ -2539,7 +2539,7 @@ mod simulation {
     }
 
     /// 600 more random programs at each of the curvature-rate shares ⅓,
-    /// ½ (the default) and 0.6: minutes in a debug build, so run on demand
+    /// ½ and 0.6 (the default): minutes in a debug build, so run on demand
     /// (`cargo test --release -p kerf-motion -- --ignored sweep
     /// --nocapture`, 20 s); it prints each failure and counts them. All
     /// pass since 2026-11-21 (35 of the 600 at ⅓ failed before the

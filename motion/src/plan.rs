@@ -249,7 +249,7 @@ impl Default for PlannerConfig {
             mode: PathMode::Blend { tolerance: 0.01 },
             jerk_limited: true,
             centripetal_share: 0.5,
-            jerk_rate_share: 0.5,
+            jerk_rate_share: 0.6,
             default_tolerance: 0.01,
             digital_outputs: MAX_DIGITAL_OUTPUTS,
             analog_outputs: MAX_ANALOG_OUTPUTS,
@@ -1982,7 +1982,9 @@ impl<'k> Planner<'k> {
         let through = (line(length_a - 2.0 * legs_a, la, v) + line(length_b - 2.0 * legs_b, lb, v))
             / 2.0
             + length / v;
-        (through > stop, Some(limits))
+        // A blend must win by half a period: the executor works in whole
+        // periods, and near a tie the model errs by that much.
+        (through > stop - 0.5 * self.config.period, Some(limits))
     }
 
     /// The path limits of waiting line `k` as programmed, worked out once

@@ -635,8 +635,11 @@ mod tests {
 
     fn planned(text: &str, mode: PathMode) -> Vec<Segment> {
         let machine = xyz(100.0, 1000.0, 50_000.0);
+        // The cases here were sized on the limits this share gives the
+        // transitions (the guard reads only lengths and limits).
         let config = PlannerConfig {
             mode,
+            jerk_rate_share: 0.5,
             ..Default::default()
         };
         let mut planner = Planner::new(&machine, Position::ZERO, config);
