@@ -1956,10 +1956,8 @@ impl<'k> Planner<'k> {
         if legs_a >= 0.999 * length_a / 2.0 || legs_b >= 0.999 * length_b / 2.0 {
             return (false, None);
         }
-        let (blend, extremes) = &chosen.blend;
-        let shape = Shape::Blend(*blend);
-        let length = shape.length();
-        let limits = self.path_limits(&shape, length, Some(extremes));
+        let length = chosen.blend.0.length();
+        let limits = self.blend_limits(chosen);
         let feed = self.pending[0]
             .segment
             .feed
@@ -1985,6 +1983,13 @@ impl<'k> Planner<'k> {
         // A blend must win by half a period: the executor works in whole
         // periods, and near a tie the model errs by that much.
         (through > stop - 0.5 * self.config.period, Some(limits))
+    }
+
+    /// The path limits of the blend `chosen`, from its sampled extremes.
+    fn blend_limits(&self, chosen: &Chosen) -> (f64, f64, f64) {
+        let (blend, extremes) = &chosen.blend;
+        let shape = Shape::Blend(*blend);
+        self.path_limits(&shape, shape.length(), Some(extremes))
     }
 
     /// The path limits of waiting line `k` as programmed, worked out once
@@ -2051,15 +2056,12 @@ impl<'k> Planner<'k> {
         } else {
             SegmentKind::Feed
         };
-        let (shape, extremes) = chosen.blend;
-        let mut blend = match chosen.limits {
-            Some((v, a, j)) => Segment {
-                max_velocity: v,
-                max_acceleration: a,
-                max_jerk: j,
-                ..self.segment_unlimited(kind, b_line_number, Shape::Blend(shape))
-            },
-            None => self.segment_sampled(kind, b_line_number, Shape::Blend(shape), Some(&extremes)),
+        let (v, a, j) = chosen.limits.unwrap_or_else(|| self.blend_limits(&chosen));
+        let mut blend = Segment {
+            max_velocity: v,
+            max_acceleration: a,
+            max_jerk: j,
+            ..self.segment_unlimited(kind, b_line_number, Shape::Blend(chosen.blend.0))
         };
         blend.feed = a_feed.min(b_feed);
         // The blend starts move b, so it carries b's force setting, not
@@ -2354,21 +2356,11 @@ impl<'k> Planner<'k> {
     /// trimming does not turn it). Copied once, straight into the ready
     /// queue, and finished there.
     fn release_front(&mut self, exit: f64) {
-        let p = &self.pending[0];
-        if p.segment.length > 0.0 {
-            let limits = match (p.segment.max_velocity.is_nan(), p.programmed()) {
-                (true, Some(programmed)) => {
-                    Some(self.path_limits(&Shape::Line(programmed.line), programmed.length, None))
-                }
-                _ => None,
-            };
-            self.ready.push_back(p.segment);
+        if self.pending[0].segment.length > 0.0 {
+            // A line's limits, worked out in place if still due.
+            self.line_limits(0);
+            self.ready.push_back(self.pending[0].segment);
             let segment = self.ready.back_mut().expect("just pushed");
-            if let Some((v, a, j)) = limits {
-                segment.max_velocity = v;
-                segment.max_acceleration = a;
-                segment.max_jerk = j;
-            }
             segment.exit_velocity = segment.max_velocity.min(exit);
         }
         self.pop_pending();
