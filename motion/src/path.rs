@@ -294,25 +294,37 @@ impl Arc {
             self.radius.min(self.end_radius),
             self.radius.max(self.end_radius),
         );
-        low != high && low > 1e-3 * high && (low / high).ln() != 0.0
+        // Radii a rounding apart have a ratio of 1 and no growth.
+        low != high && low > 1e-3 * high && low / high < 1.0
     }
 
     /// Length of the in-plane part, mm.
     pub fn in_plane_length(&self) -> f64 {
-        let d = self.end_radius - self.radius;
-        if !self.is_logarithmic() {
+        self.in_plane_length_with(self.growth())
+    }
+
+    /// [`in_plane_length`](Self::in_plane_length) given
+    /// [`growth`](Self::growth).
+    fn in_plane_length_with(&self, (growth, h): (f64, f64)) -> f64 {
+        if growth == 0.0 {
             return (self.radius + self.end_radius) / 2.0 * self.sweep.abs();
         }
-        let (_, h) = self.growth();
+        let d = self.end_radius - self.radius;
         (d * d + (h * self.sweep).powi(2)).sqrt()
     }
 
     /// Helix length: the in-plane arc and the linear axes (XYZ part only
     /// when XYZ move, as for lines).
     pub fn length(&self) -> f64 {
+        self.length_with(self.growth())
+    }
+
+    /// [`length`](Self::length) given [`growth`](Self::growth): the
+    /// executor's frame on a spiral needs both, every servo period.
+    fn length_with(&self, growth: (f64, f64)) -> f64 {
         let d = self.axial_delta();
         let xyz_axial: f64 = d[..3].iter().map(|x| x * x).sum();
-        let in_plane = self.in_plane_length();
+        let in_plane = self.in_plane_length_with(growth);
         (in_plane * in_plane + xyz_axial).sqrt()
     }
 
@@ -343,7 +355,11 @@ impl Arc {
     /// Fraction of the sweep at fraction `q` of the arc's length: the
     /// inverse of [`length_fraction`](Self::length_fraction).
     pub fn sweep_fraction(&self, q: f64) -> f64 {
-        let (growth, _) = self.growth();
+        self.sweep_fraction_with(q, self.growth().0)
+    }
+
+    /// [`sweep_fraction`](Self::sweep_fraction) given the spiral's growth.
+    fn sweep_fraction_with(&self, q: f64, growth: f64) -> f64 {
         if growth == 0.0 {
             return q;
         }
@@ -1101,14 +1117,16 @@ impl Shape {
     /// n2 = (cos θ, sin θ); one from or to its centre with angle and radius
     /// linear in q.
     fn frame_arc(&self, a: &Arc, s: f64) -> Frame {
-        let len = a.length();
+        // Worked out once: the executor asks for a frame every period.
+        let (growth, h) = a.growth();
+        let len = a.length_with((growth, h));
         let q = if len > 0.0 {
             (s / len).clamp(0.0, 1.0)
         } else {
             1.0
         };
-        let logarithmic = a.is_logarithmic();
-        let f = if logarithmic { a.sweep_fraction(q) } else { q };
+        let logarithmic = growth != 0.0;
+        let f = a.sweep_fraction_with(q, growth);
         let d = a.end_radius - a.radius;
         let theta = a.start_angle + a.sweep * f;
         let (sin, cos) = theta.sin_cos();
@@ -1133,7 +1151,7 @@ impl Shape {
         let mut t: Vec9 = std::array::from_fn(|i| axial[i] / len);
         let mut k = [0.0; 9];
         if logarithmic {
-            let rw = a.sweep * a.growth().1 / len;
+            let rw = a.sweep * h / len;
             let w = rw / r;
             t[a.plane.0] = dr * cos - rw * sin;
             t[a.plane.1] = dr * sin + rw * cos;
