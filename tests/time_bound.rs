@@ -209,6 +209,16 @@ fn dwells_and_exact_stops_stop_the_tool_and_dwells_add_their_time() {
         "{} vs {want}",
         dwell.time
     );
+    // Where the time goes: the steps before the dwell take one move's
+    // time, and all of them the cycle less the dwell.
+    let moving: f64 = dwell.step.iter().sum();
+    assert!((moving + 0.5 - dwell.time).abs() < 1e-9, "{moving}");
+    let first: f64 = (0..dwell.s.len())
+        .filter(|&k| dwell.s[k] < 50.0 - 1e-9)
+        .map(|k| dwell.step[k])
+        .sum();
+    let want = trapezoid(50.0, 100.0, 1500.0);
+    assert!((first / want - 1.0).abs() < 0.005, "{first} vs {want}");
 }
 
 #[test]

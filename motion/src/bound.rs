@@ -242,6 +242,10 @@ pub struct Profile {
     pub s: Vec<f64>,
     /// Optimal path speed at each node, mm/s.
     pub v: Vec<f64>,
+    /// Time from each node to the next, s (0 after the last), by the
+    /// same rules as `time`: where along the path the optimum spends it,
+    /// to set beside where a planned run does. Dwells are not in it.
+    pub step: Vec<f64>,
 }
 
 /// Collects planned segments and computes the time-optimal profile along
@@ -748,7 +752,7 @@ impl<'k> TimeBound<'k> {
             at += nodes[k].ds;
             time += step[k];
         }
-        Profile { time, s, v }
+        Profile { time, s, v, step }
     }
 
     /// One forward and one backward pass over `x` (lowering it only):
