@@ -2212,9 +2212,10 @@ impl<'k> Planner<'k> {
         };
         let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
         // The blend worker's, if it made it from this start: on a dense
-        // curve (both consumed) or at a corner (neither). It leaves the
-        // reach to be checked.
-        let worked = (a_consumed == b_consumed)
+        // curve, from a's fitted midpoint or from a corner's leg on a, or
+        // at a corner from a leg on a (not from a's midpoint into a
+        // corner, which it leaves). It leaves the reach to be checked.
+        let worked = (!a_consumed || b_consumed)
             .then_some(self.ahead.as_ref())
             .flatten()
             .and_then(|ahead| ahead.take(self.released + 1, &xyz_frame(&start), legs, legs_bc));

@@ -52,9 +52,11 @@ const BATCH: usize = 16;
 /// Which share keeps both threads busy depends on what else the
 /// planner's thread does (a 200,000-chord spiral, read beforehand, ran
 /// fastest at one in two, 1.13–1.17 M lines/s; with the interpreter on
-/// the planner's thread, at one in three, 0.84 M), so the worker moves
-/// between these as it goes (`Worker::adapt`).
-const SHARES: [(u64, u64); 3] = [(2, 1), (3, 2), (4, 3)];
+/// the planner's thread, at one in three, 0.84 M; stellabee1.ngc, whose
+/// corners cost the planner more, leaves the worker idle even at three
+/// in four and gains 3–4 % at seven in eight and beyond), so the worker
+/// moves between these as it goes (`Worker::adapt`).
+const SHARES: [(u64, u64); 7] = [(2, 1), (3, 2), (4, 3), (6, 5), (8, 7), (16, 15), (32, 31)];
 
 /// Most periods in a row the worker must find itself idle before it
 /// raises its share again.
@@ -795,7 +797,7 @@ impl Worker {
             Move::Line { line, mode } => Some((line, *mode)),
             Move::Other => None,
         };
-        let (Some((a, _)), Some((b, b_mode))) = (at(j - 1), at(j)) else {
+        let (Some((a, a_mode)), Some((b, b_mode))) = (at(j - 1), at(j)) else {
             return;
         };
         let PathMode::Blend { tolerance } = b_mode else {
@@ -807,14 +809,22 @@ impl Worker {
         let c = at(j + 1);
         let legs_bc = c.and_then(|(c, c_mode)| blend_legs(b, c, c_mode));
         // The planner's branches (`Planner::choose_blend`): a dense curve
-        // where blends take whole halves of a and b, a corner where they
-        // take neither. Between the two, where the blend starts depends on
-        // the blend before, which the planner decides with the reach.
+        // where blends take whole halves of b (from a's fitted midpoint
+        // where the blend before took a's other half, else from a leg on
+        // a), a corner where they take neither half of b. From a's fitted
+        // midpoint into a corner the planner works the blend out itself.
         let (half_a, half_b) = (a.length / 2.0, b.length / 2.0);
         let b_whole = legs.1 == half_b && legs_bc.is_some_and(|l| l.0 == half_b);
         let a_whole = legs.0 == half_a;
+        // Whether the blend before takes a's other half (if it is made):
+        // then this one starts at a's fitted midpoint.
+        let before = (j >= self.first + 2).then(|| at(j - 2)).flatten();
+        let a_taken = a_whole
+            && before
+                .and_then(|(p, _)| blend_legs(p, a, a_mode))
+                .is_some_and(|l| l.1 == half_a);
         let (moves, chords, first) = (&self.moves, &self.chords, self.first);
-        let start = if a_whole && b_whole {
+        let start = if a_taken && b_whole {
             // The blend before ended at a's fitted midpoint, as the planner
             // keeps it: X Y Z from the fit, the other axes where the
             // trimmed line starts. (Had the planner decided a's blend
@@ -835,13 +845,16 @@ impl Worker {
             let rest: [f64; 6] =
                 std::array::from_fn(|i| a.line.start[i + 3] + half_a * a.direction[i + 3]);
             frame_on(&xyz_frame(&fit_a), &rest)
-        } else if !a_whole && !b_whole {
-            a.frame_at(legs.0, true)
         } else {
-            return;
+            // On the line, a leg from its end: at a corner, and where a
+            // dense curve starts after one (the planner starts there
+            // wherever the blend before left a's other half, even if this
+            // one takes a's whole half).
+            a.frame_at(legs.0, true)
         };
-        // Dense: the blend from a's fitted midpoint to b's, and on to c.
-        let dense = match (a_whole, c, legs_bc) {
+        // Dense: the blend from that start to b's fitted midpoint, and on
+        // to c.
+        let dense = match (b_whole, c, legs_bc) {
             (true, Some((c, c_mode)), Some(legs_bc)) => {
                 let PathMode::Blend { tolerance: tol_c } = c_mode else {
                     return;
