@@ -13,7 +13,7 @@ use std::collections::VecDeque;
 
 mod ahead;
 
-use ahead::{Speculation, Worked};
+use ahead::{Fallback, Speculation, Worked};
 
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
@@ -2238,26 +2238,40 @@ impl<'k> Planner<'k> {
                 self.blend_within(b, c, legs_bc, &mid, &c_start)?;
                 Some(Chosen::new(legs, &bl, &mid))
             };
-            let fitted = if let Some(Speculation {
-                worked: Worked::Dense { fit, bc },
+            let in_reach = |ab: &(Blend, BlendExtremes), bc: &[[f64; 3]; 6]| {
+                self.blend_in_reach(&ab.0.control, &ab.0.rest)
+                    && self.blend_in_reach(bc, &ab.0.rest)
+            };
+            let chosen = if let Some(Speculation {
+                worked:
+                    Worked::Dense {
+                        fit,
+                        bc,
+                        vertices: fallback,
+                    },
                 sampled,
                 ..
             }) = worked.as_deref()
             {
-                match (fit, bc, sampled) {
-                    (Some(mid), Some(bc), Some(ab))
-                        if self.blend_in_reach(&ab.0.control, &ab.0.rest)
-                            && self.blend_in_reach(bc, &ab.0.rest) =>
-                    {
+                match (fit, bc, fallback, sampled) {
+                    (Some(mid), Some(bc), _, Some(ab)) if in_reach(ab, bc) => {
                         Some(Chosen::worked(legs, ab, *mid))
+                    }
+                    // The fit's blends are out of reach: the fallback is
+                    // still to be tried.
+                    (_, Some(_), _, _) => vertices().and_then(through),
+                    (_, None, Fallback::Within { mid, bc }, Some(ab)) => {
+                        in_reach(ab, bc).then(|| Chosen::worked(legs, ab, *mid))
                     }
                     _ => None,
                 }
             } else {
-                self.fitted_mid().and_then(through)
+                self.fitted_mid()
+                    .and_then(through)
+                    .or_else(|| vertices().and_then(through))
             };
-            if let Some(chosen) = fitted.or_else(|| vertices().and_then(through)) {
-                return Some(chosen);
+            if chosen.is_some() {
+                return chosen;
             }
         }
         // Zero curvature at b's end. With the start fixed the legs are too

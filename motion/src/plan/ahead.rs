@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 
 use super::{
     blend_legs, blend_near, corner_legs, fitted_frame, frame_on, xyz_frame, Chord, FrameXyz,
-    PathMode, Programmed, FIT_SIDE,
+    PathMode, Planner, Programmed, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -148,6 +148,23 @@ pub(super) struct Speculation {
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
+/// The fallback of a dense junction whose fit gave no blends within
+/// tolerance (`Planner::choose_blend`'s `vertices`), as the worker found it.
+/// (Not boxed, as [`Worked`].)
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Fallback {
+    /// Not tried: the fit's blends were within tolerance (if the planner
+    /// finds them out of reach, it tries the fallback itself).
+    Untried,
+    /// A blend from `start` or the one onto c leaves the tolerance.
+    Outside,
+    /// Both are within tolerance: the midpoint frame (X Y Z) and the X Y Z
+    /// control points of the blend onto c; the blend into it is
+    /// `sampled`.
+    Within { mid: FrameXyz, bc: [[f64; 3]; 6] },
+}
+
 /// A speculation [`Ahead::take`] found usable, read in place in its
 /// slot. The worker has finished with that junction for good, and while
 /// this lives the planner does not tell it that the slot may be reused
@@ -183,6 +200,9 @@ pub(super) enum Worked {
         /// both it and the blend from `start` to `fit` (then `sampled`)
         /// are within tolerance.
         bc: Option<[[f64; 3]; 6]>,
+        /// Where there is no `bc`, the planner's fallback: the blends
+        /// through b's midpoint with the curvature its two vertices give.
+        vertices: Fallback,
     },
     /// At a corner (neither a's end nor b's start is a whole half): the
     /// first of the legs, shrinking by 0.7 from the tolerance's, whose
@@ -889,9 +909,30 @@ impl Worker {
                         }
                     }
                 }
+                // The fit's blends leave the tolerance (or there is no
+                // fit): the planner's fallback through b's midpoint.
+                let vertices = if bc.is_some() {
+                    Fallback::Untried
+                } else {
+                    let mut mid = b.frame_at(legs.1, false);
+                    mid.curvature = Planner::mid_curvature(a, b, c);
+                    let (control, near) = blend_near(a, b, tolerance, legs, &start, &mid);
+                    let c_start = c.frame_at(legs_bc.1, false);
+                    match near.then(|| blend_near(b, c, tol_c, legs_bc, &mid, &c_start)) {
+                        Some((control_bc, true)) => {
+                            s.sampled = Some(Blend::sampled(control));
+                            Fallback::Within {
+                                mid: xyz_frame(&mid),
+                                bc: control_bc.map(|q| [q[0], q[1], q[2]]),
+                            }
+                        }
+                        _ => Fallback::Outside,
+                    }
+                };
                 s.worked = Worked::Dense {
                     fit: fit.as_ref().map(xyz_frame),
                     bc,
+                    vertices,
                 };
             } else {
                 // The planner's corner: the tolerance's legs, then shorter.
