@@ -2215,9 +2215,9 @@ impl<'k> Planner<'k> {
         // curve, from a's fitted midpoint or from a corner's leg on a, or
         // at a corner from a leg on a (not from a's midpoint into a
         // corner, which it leaves). It leaves the reach to be checked.
-        let worked = (!a_consumed || b_consumed)
-            .then_some(self.ahead.as_ref())
-            .flatten()
+        let worked = self
+            .ahead
+            .as_ref()
             .and_then(|ahead| ahead.take(self.released + 1, &xyz_frame(&start), legs, legs_bc));
         if let (true, Some(c), Some(legs_bc)) = (b_consumed, c, legs_bc) {
             let c_start = on_line(c, legs_bc.1, false)?;
@@ -2279,20 +2279,26 @@ impl<'k> Planner<'k> {
         // is within tolerance.
         let end = |legs: (f64, f64)| on_line(b, legs.1, false);
         if let Some(Speculation {
-            worked: Worked::Corner { chosen },
+            worked:
+                Worked::Corner {
+                    chosen,
+                    from_midpoint,
+                },
             sampled,
             ..
         }) = worked.as_deref()
         {
-            match (chosen, sampled) {
+            // Only if made for the tries this corner gets.
+            match (chosen, sampled, *from_midpoint == a_consumed) {
+                (_, _, false) => {}
                 // The first legs whose blend is within the tolerance, if
                 // in reach; else what comes after them is to be tried.
-                (Some(legs), Some(s)) if self.blend_in_reach(&s.0.control, &s.0.rest) => {
+                (Some(legs), Some(s), true) if self.blend_in_reach(&s.0.control, &s.0.rest) => {
                     return Some(Chosen::worked(*legs, s, xyz_frame(&end(*legs)?)));
                 }
-                (Some(_), _) => {}
+                (Some(_), _, true) => {}
                 // None of the legs gives a blend within the tolerance.
-                (None, _) => return None,
+                (None, _, true) => return None,
             }
         }
         let tries = if a_consumed { 1 } else { CORNER_TRIES };

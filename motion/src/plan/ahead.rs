@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 
 use super::{
     blend_legs, blend_near, corner_legs, fitted_frame, frame_on, xyz_frame, Chord, FrameXyz,
-    PathMode, Planner, Programmed, FIT_SIDE,
+    PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -148,6 +148,9 @@ pub(super) struct Speculation {
     pub sampled: Option<(Blend, BlendExtremes)>,
 }
 
+/// A junction's blend legs (`blend_legs`; none where it gives none).
+type Legs = Option<(f64, f64)>;
+
 /// The fallback of a dense junction whose fit gave no blends within
 /// tolerance (`Planner::choose_blend`'s `vertices`), as the worker found it.
 /// (Not boxed, as [`Worked`].)
@@ -204,10 +207,15 @@ pub(super) enum Worked {
         /// through b's midpoint with the curvature its two vertices give.
         vertices: Fallback,
     },
-    /// At a corner (neither a's end nor b's start is a whole half): the
-    /// first of the legs, shrinking by 0.7 from the tolerance's, whose
-    /// blend (then `sampled`) is within b's tolerance.
-    Corner { chosen: Option<(f64, f64)> },
+    /// At a corner (b's start is not a whole half): the first of the
+    /// legs, shrinking by 0.7 from the tolerance's, whose blend (then
+    /// `sampled`) is within b's tolerance; from a's fitted midpoint
+    /// (`from_midpoint`, the blend before took a's other half) only the
+    /// tolerance's legs, as the planner tries.
+    Corner {
+        chosen: Option<(f64, f64)>,
+        from_midpoint: bool,
+    },
 }
 
 /// One junction's place in the ring of worked-out blends.
@@ -602,6 +610,13 @@ struct Worker {
     consumed: u64,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
+    /// Where the last dense blend worked out ended (X Y Z, at b's
+    /// midpoint: the fit's frame, or the fallback's), with its junction:
+    /// the blend after it starts there if the planner takes it.
+    ended: Option<(u64, FrameXyz)>,
+    /// The last junction worked out, with its legs and those of the
+    /// junction after it (`blend_legs`, none where it gives none).
+    legs_seen: Option<(u64, Legs, Legs)>,
     /// The junction at which the share is next judged (`adapt`).
     judge_at: u64,
     /// Since the share was last judged: the worker's junctions the
@@ -627,6 +642,8 @@ impl Worker {
             last_break: None,
             consumed: 0,
             last_fit: None,
+            ended: None,
+            legs_seen: None,
             judge_at: SHARE_PERIOD,
             late: 0,
             idle: 0,
@@ -823,28 +840,39 @@ impl Worker {
         let PathMode::Blend { tolerance } = b_mode else {
             return;
         };
-        let Some(legs) = blend_legs(a, b, b_mode) else {
+        // The legs at junction j − 1 and at this one, from the junction
+        // before where the worker worked that out (its `legs_bc` are this
+        // one's legs).
+        let seen = self.legs_seen.filter(|&(at, ..)| at + 1 == j);
+        let legs = match seen {
+            Some((_, _, legs)) => legs,
+            None => blend_legs(a, b, b_mode),
+        };
+        let Some(legs) = legs else {
             return;
         };
         let c = at(j + 1);
         let legs_bc = c.and_then(|(c, c_mode)| blend_legs(b, c, c_mode));
+        self.legs_seen = Some((j, Some(legs), legs_bc));
         // The planner's branches (`Planner::choose_blend`): a dense curve
-        // where blends take whole halves of b (from a's fitted midpoint
-        // where the blend before took a's other half, else from a leg on
-        // a), a corner where they take neither half of b. From a's fitted
-        // midpoint into a corner the planner works the blend out itself.
+        // where blends take whole halves of b, a corner where they do not;
+        // either from a's fitted midpoint where the blend before took a's
+        // other half, else from a leg on a.
         let (half_a, half_b) = (a.length / 2.0, b.length / 2.0);
         let b_whole = legs.1 == half_b && legs_bc.is_some_and(|l| l.0 == half_b);
         let a_whole = legs.0 == half_a;
         // Whether the blend before takes a's other half (if it is made):
         // then this one starts at a's fitted midpoint.
-        let before = (j >= self.first + 2).then(|| at(j - 2)).flatten();
-        let a_taken = a_whole
-            && before
-                .and_then(|(p, _)| blend_legs(p, a, a_mode))
-                .is_some_and(|l| l.1 == half_a);
+        let before = match seen {
+            Some((_, before, _)) => before,
+            None => (j >= self.first + 2)
+                .then(|| at(j - 2))
+                .flatten()
+                .and_then(|(p, _)| blend_legs(p, a, a_mode)),
+        };
+        let a_taken = a_whole && before.is_some_and(|l| l.1 == half_a);
         let (moves, chords, first) = (&self.moves, &self.chords, self.first);
-        let start = if a_taken && b_whole {
+        let start = if a_taken {
             // The blend before ended at a's fitted midpoint, as the planner
             // keeps it: X Y Z from the fit, the other axes where the
             // trimmed line starts. (Had the planner decided a's blend
@@ -859,12 +887,16 @@ impl Worker {
                     filled.fit = Some(fit);
                 });
             }
-            let Some(fit_a) = fit_a else {
-                return;
+            // Where the worker's own blend before ended, else the fit (the
+            // planner's junction, or the worker's that made no blend).
+            let mid = match (self.ended, fit_a) {
+                (Some((at, mid)), _) if at == j - 1 => mid,
+                (_, Some(fit_a)) => xyz_frame(&fit_a),
+                (_, None) => return,
             };
             let rest: [f64; 6] =
                 std::array::from_fn(|i| a.line.start[i + 3] + half_a * a.direction[i + 3]);
-            frame_on(&xyz_frame(&fit_a), &rest)
+            frame_on(&mid, &rest)
         } else {
             // On the line, a leg from its end: at a corner, and where a
             // dense curve starts after one (the planner starts there
@@ -884,6 +916,7 @@ impl Worker {
             _ => None,
         };
         let last_fit = &mut self.last_fit;
+        let mut ended = None;
         // Worked out in its slot: copying a speculation in showed in
         // profiles.
         self.shared.fill(j, &mut self.consumed, |filled| {
@@ -892,7 +925,10 @@ impl Worker {
                 start: xyz_frame(&start),
                 legs,
                 legs_bc,
-                worked: Worked::Corner { chosen: None },
+                worked: Worked::Corner {
+                    chosen: None,
+                    from_midpoint: a_taken,
+                },
                 sampled: None,
             });
             if let Some((c, tol_c, legs_bc)) = dense {
@@ -929,24 +965,45 @@ impl Worker {
                         _ => Fallback::Outside,
                     }
                 };
+                ended = match (&fit, bc, &vertices) {
+                    (Some(fit), Some(_), _) => Some((j, xyz_frame(fit))),
+                    (_, None, Fallback::Within { mid, .. }) => Some((j, *mid)),
+                    _ => None,
+                };
                 s.worked = Worked::Dense {
                     fit: fit.as_ref().map(xyz_frame),
                     bc,
                     vertices,
                 };
             } else {
-                // The planner's corner: the tolerance's legs, then shorter.
-                for legs in corner_legs(legs) {
-                    let (from, to) = (a.frame_at(legs.0, true), b.frame_at(legs.1, false));
+                s.worked = Worked::Corner {
+                    chosen: None,
+                    from_midpoint: a_taken,
+                };
+                // The planner's corner: from a's fitted midpoint these legs
+                // alone (the blend before fixed a's end); from a leg on a,
+                // the tolerance's legs, then shorter.
+                let tries = if a_taken { 1 } else { CORNER_TRIES };
+                for legs in corner_legs(legs).take(tries) {
+                    let from = if a_taken {
+                        start
+                    } else {
+                        a.frame_at(legs.0, true)
+                    };
+                    let to = b.frame_at(legs.1, false);
                     let (control, near) = blend_near(a, b, tolerance, legs, &from, &to);
                     if near {
-                        s.worked = Worked::Corner { chosen: Some(legs) };
+                        s.worked = Worked::Corner {
+                            chosen: Some(legs),
+                            from_midpoint: a_taken,
+                        };
                         s.sampled = Some(Blend::sampled(control));
                         break;
                     }
                 }
             }
         });
+        self.ended = ended;
     }
 }
 
