@@ -426,6 +426,8 @@ struct Tally {
     fit_looked: u64,
     /// Fits the planner took from the worker.
     fitted: u64,
+    /// Blends the planner worked out itself at the worker's junctions.
+    own: u64,
 }
 
 impl Ahead {
@@ -465,6 +467,15 @@ impl Ahead {
             consumed: Cell::new(0),
             #[cfg(test)]
             tally: Default::default(),
+        }
+    }
+
+    /// The planner worked out the blend at junction `index` itself
+    /// (counted in the tally if it is the worker's; tests only).
+    #[cfg(test)]
+    pub(super) fn worked_here(&self, index: u64) {
+        if self.shared.takes(index) {
+            self.count(|t| t.own += 1);
         }
     }
 
@@ -1216,6 +1227,34 @@ mod tests {
         assert_eq!(share(), 0, "no smaller share than the first");
     }
 
+    /// LinuxCNC's stellabee1.ngc (beside the repository, as CI has it)
+    /// turns between dense curves, corners and fits that fail near them:
+    /// a patient worker that takes every junction leaves the planner
+    /// hardly any blend to work out itself, and the plan is the same.
+    #[test]
+    fn the_worker_makes_nearly_every_blend_of_stellabee() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../shared/conformance/linuxcnc-programs/tp-stress/performance/stellabee1.ngc"
+        );
+        let Ok(text) = std::fs::read_to_string(path) else {
+            eprintln!("{path} not found: skipped");
+            return;
+        };
+        // Millimetres, into mill3's travel; the first 20,000 lines.
+        let body: Vec<&str> = text.lines().take(20_000).collect();
+        let text = format!(
+            "G21 G10 L2 P1 X100 Y50 Z-20\nG54\n{}\nM2\n",
+            body.join("\n")
+        );
+        let (alone, _) = plan(&text, Helper::None);
+        let (helped, t) = plan(&text, Helper::Patient { all: true });
+        assert!(alone == helped, "the worker changed the plan");
+        eprintln!("stellabee1.ngc, first 20,000 lines: {t:?}");
+        assert!(t.taken > 15_000, "{t:?}");
+        assert!(t.own as f64 <= 0.02 * t.taken as f64, "{t:?}");
+    }
+
     #[test]
     fn the_blend_worker_changes_no_plan_bit() {
         // A spiral of 0.02 mm chords, to 5 decimals as CAM writes them,
@@ -1263,6 +1302,15 @@ mod tests {
                     assert!(t.looked > least, "program {seed} {helper:?}: {t:?}");
                     assert!(
                         t.taken as f64 >= share * t.looked as f64,
+                        "program {seed} {helper:?}: {t:?}"
+                    );
+                    // Nor does the planner work many out itself: only
+                    // those after a blend the worker did not make (since
+                    // 2026-11-26 the worker also makes the fit's
+                    // fallback, the blend after it, and the blends from a
+                    // dense curve into a corner and back).
+                    assert!(
+                        t.own as f64 <= (1.0 - share) * t.taken as f64,
                         "program {seed} {helper:?}: {t:?}"
                     );
                     if !all {
