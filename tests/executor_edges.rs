@@ -4,7 +4,8 @@
 
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::offline::{self, RunConfig};
-use kerf_motion::{PathMode, PlannerConfig};
+use kerf_motion::path::Shape;
+use kerf_motion::{Executor, PathMode, PlannerConfig};
 
 /// Largest use of any axis or joint velocity, acceleration or jerk limit
 /// when `text` runs on mill3 under `planner`.
@@ -67,4 +68,62 @@ fn speeding_up_toward_a_lower_jerk_limit_stays_within_limits() {
     };
     let ratio = limit_use(text, planner);
     assert!(ratio <= 1.0 + 1e-6, "limit use {ratio}");
+}
+
+/// stellabee1.ngc lines 22750–22780. Program line 29 here (22774 there)
+/// is a 0.166 mm line into a stop after a blend passed at 4.2 mm/s with
+/// an acceleration limit of 55 mm/s². The stop comes into reach on the
+/// blend, and its profile is aimed there, under the blend's limits; the
+/// executor kept that profile, and with it 54.5 mm/s² of braking, all
+/// along the line, whose own limit is 1669 mm/s²: 79 ms where the line
+/// from rest to rest takes 40. It now drops a kept stop once the limits
+/// up to the stop have risen well above the profile's (34 ms).
+#[test]
+fn a_stop_aimed_on_a_slow_blend_brakes_under_the_lines_own_limits() {
+    let text = "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18 G94\nF999\n\
+        G0 X0.3960 Y4.0420 Z-0.2392\nG1\n\
+        X0.4000 Z-0.2363\nX0.4280 Z-0.2392\nX0.4340 Z-0.2373\nX0.4540 Z-0.2383\n\
+        X0.4640 Z-0.2363\nX0.4780 Z-0.2382\nX0.4840 Z-0.2363\nX0.4920\n\
+        X0.4980 Z-0.2382\nX0.5280 Z-0.2373\nX0.5360 Z-0.2389\nX0.5440 Z-0.2363\n\
+        X0.5500 Z-0.2379\nX0.5580 Z-0.2363\nX0.5620 Z-0.2379\nX0.5640 Z-0.2353\n\
+        X0.5680 Z-0.2343\nX0.5720 Z-0.2383\nX0.5840 Z-0.2382\nX0.5900 Z-0.2363\n\
+        X0.5940 Z-0.2373\nX0.5980 Z-0.2353\nX0.6060 Z-0.2392\nX0.6100 Z-0.2363\n\
+        X0.6160 Z-0.2373\nX0.6200 Z-0.2353\nX0.6320 Z-0.2379\nX0.6380 Z-0.2363\n\
+        X0.6420 Z-0.2382\nX0.6640 Z-0.2383\nX0.6680 Z-0.2353\nM2\n";
+    let machine = kerf_machines::load("mill3").unwrap();
+    let planner = PlannerConfig::default();
+    let program = Interpreter::from_text(text, "stretch.ngc", Position::ZERO);
+    let segments =
+        offline::plan_program(program, &*machine.kinematics, Position::ZERO, planner, 1).unwrap();
+    // Periods spent on each segment (the one at the front of the queue).
+    let mut executor = Executor::new(Position::ZERO);
+    let mut periods = vec![0usize; segments.len()];
+    let mut front = 0;
+    loop {
+        let sample = executor.tick(planner.period, &segments[front..], &[]);
+        periods[front.min(segments.len() - 1)] += 1;
+        front += sample.consumed;
+        if sample.stopped_at == Some(1) {
+            break;
+        }
+    }
+    let k = (1..segments.len())
+        .find(|&k| {
+            let s = &segments[k];
+            s.line == 29 && s.exit_velocity == 0.0 && matches!(s.shape, Shape::Line(_))
+        })
+        .expect("the line into the stop");
+    let (line, before) = (&segments[k], &segments[k - 1]);
+    assert!(
+        matches!(before.shape, Shape::Blend(_)) && before.max_velocity < 5.0,
+        "a slow blend before it: {before:?}"
+    );
+    let took = periods[k] as f64 * planner.period;
+    let least = 4.0 * (line.length / (2.0 * line.max_jerk)).cbrt();
+    assert!(
+        took <= least + 2.0 * planner.period,
+        "{took} s on the {} mm line, {least} s from rest to rest",
+        line.length
+    );
+    assert!(limit_use(text, planner) <= 1.0 + 1e-6);
 }
