@@ -2245,12 +2245,7 @@ impl<'k> Planner<'k> {
                     && self.blend_in_reach(bc, &ab.0.rest)
             };
             let chosen = if let Some(Speculation {
-                worked:
-                    Worked::Dense {
-                        fit,
-                        bc,
-                        vertices: fallback,
-                    },
+                worked: Worked::Dense { fit, bc, fallback },
                 sampled,
                 ..
             }) = worked.as_deref()

@@ -205,7 +205,7 @@ pub(super) enum Worked {
         bc: Option<[[f64; 3]; 6]>,
         /// Where there is no `bc`, the planner's fallback: the blends
         /// through b's midpoint with the curvature its two vertices give.
-        vertices: Fallback,
+        fallback: Fallback,
     },
     /// At a corner (b's start is not a whole half): the first of the
     /// legs, shrinking by 0.7 from the tolerance's, whose blend (then
@@ -958,7 +958,7 @@ impl Worker {
                 }
                 // The fit's blends leave the tolerance (or there is no
                 // fit): the planner's fallback through b's midpoint.
-                let vertices = if bc.is_some() {
+                let fallback = if bc.is_some() {
                     Fallback::Untried
                 } else {
                     let mut mid = b.frame_at(legs.1, false);
@@ -976,7 +976,7 @@ impl Worker {
                         _ => Fallback::Outside,
                     }
                 };
-                ended = match (&fit, bc, &vertices) {
+                ended = match (&fit, bc, &fallback) {
                     (Some(fit), Some(_), _) => Some((j, xyz_frame(fit))),
                     (_, None, Fallback::Within { mid, .. }) => Some((j, *mid)),
                     _ => None,
@@ -984,7 +984,7 @@ impl Worker {
                 s.worked = Worked::Dense {
                     fit: fit.as_ref().map(xyz_frame),
                     bc,
-                    vertices,
+                    fallback,
                 };
             } else {
                 s.worked = Worked::Corner {
