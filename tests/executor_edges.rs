@@ -127,3 +127,119 @@ fn a_stop_aimed_on_a_slow_blend_brakes_under_the_lines_own_limits() {
     );
     assert!(limit_use(text, planner) <= 1.0 + 1e-6);
 }
+
+/// Shortest time to cover `length` mm from speed `v0` to speed `v1`, both
+/// with zero acceleration, under a speed cap `vmax`, |a| ≤ `amax` and
+/// |jerk| ≤ `jmax`: up to a peak speed and back down, each side a
+/// textbook S-curve, the peak found by bisection.
+fn s_curve_time(length: f64, v0: f64, v1: f64, vmax: f64, amax: f64, jmax: f64) -> f64 {
+    // Time and distance of one speed change between va and vb.
+    let change = |va: f64, vb: f64| {
+        let dv = (vb - va).abs();
+        let t = if dv >= amax * amax / jmax {
+            dv / amax + amax / jmax
+        } else {
+            2.0 * (dv / jmax).sqrt()
+        };
+        (t, (va + vb) / 2.0 * t)
+    };
+    let fits = |peak: f64| change(v0, peak).1 + change(peak, v1).1 <= length;
+    let (mut lo, mut hi) = (v0.max(v1), vmax);
+    assert!(fits(lo), "cannot go from {v0} to {v1} in {length} mm");
+    if !fits(hi) {
+        for _ in 0..100 {
+            let mid = (lo + hi) / 2.0;
+            if fits(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi = lo;
+    }
+    let ((t0, d0), (t1, d1)) = (change(v0, hi), change(hi, v1));
+    t0 + t1 + (length - d0 - d1) / hi
+}
+
+/// stellabee1.ngc lines 22528–22556. Program line 26 here (22547 there)
+/// is a 1.13 mm arc between two slow blends; the one after it allows
+/// 25 mm/s² and, two segments on, another 107 mm/s². Braking toward the
+/// second blend's cap (1.46 mm/s) at the arc's 500 mm/s², the look ahead
+/// checked that the deceleration could be eased at once into each later
+/// segment's limit a period's travel early, at the speed before braking;
+/// the approach, which brakes harder first and eases to zero right at the
+/// blend, failed that check, and the search braked at 500 mm/s² until the
+/// arc's end, where the motion came to rest and crept into the blend at
+/// its 25 mm/s²: 125 ms on the arc. Segments past a cap the motion is
+/// known to reach with zero acceleration are no longer checked so, and
+/// the period's travel is at the speed the easing ends at: 112 ms, within
+/// two periods of one S-curve from the arc's entry speed to that cap.
+#[test]
+fn an_approach_into_a_slow_blend_is_not_cut_off_by_the_segments_after_it() {
+    let text = "G21 G10 L2 P1 X100 Y50 Z-20\nG54\nG20 G90 G64 G18 G94\nF999\n\
+        G0 X1.2900 Y4.0580 Z-0.0650\nG1\n\
+        X1.2880\nX1.2860 Z-0.0644\nX1.2820 Z-0.0608\nX1.2780 Z-0.0236\n\
+        X1.2740 Z-0.0225\nX1.2700 Z-0.0271\nX1.2640\nX1.2600 Z-0.0526\n\
+        X1.2580 Z-0.0487\nX1.2560 Z-0.0481\nX1.2520 Z-0.0245\nX1.2500 Z-0.0235\n\
+        X1.2460 Z-0.0245\nX1.2440 Z-0.0324\n\
+        G3 X1.2380 Y4.0580 Z-0.0105 I0.0493 K0.0253\nG1 X1.2340 Z-0.0098\n\
+        X1.2300 Z-0.0124\nX1.2240 Z-0.0108\nX1.2220 Z-0.0118\n\
+        G3 X1.2140 Y4.0580 Z-0.0585 I-0.1840 K0.0075\nG1 X1.2120 Z-0.0569\n\
+        X1.2100 Z-0.0487\nX1.2080 Z-0.0252\nX1.2040 Z-0.0245\nX1.2020 Z-0.0114\n\
+        X1.1940 Z-0.0098\nX1.1900 Z-0.0137\nX1.1880 Z-0.0075\nX1.1840 Z-0.0069\nM2\n";
+    let machine = kerf_machines::load("mill3").unwrap();
+    let planner = PlannerConfig::default();
+    let program = Interpreter::from_text(text, "stretch.ngc", Position::ZERO);
+    let segments =
+        offline::plan_program(program, &*machine.kinematics, Position::ZERO, planner, 1).unwrap();
+    let arc = (0..segments.len())
+        .find(|&k| segments[k].line == 26 && matches!(segments[k].shape, Shape::Arc(_)))
+        .expect("the arc");
+    // Periods on each segment (the one at the front of the queue), and
+    // the speed as the motion leaves the arc and enters it.
+    let mut executor = Executor::new(Position::ZERO);
+    let mut periods = vec![0usize; segments.len()];
+    let (mut front, mut entry, mut exit) = (0, None, None);
+    let mut last_speed = 0.0;
+    loop {
+        let sample = executor.tick(planner.period, &segments[front..], &[]);
+        periods[front.min(segments.len() - 1)] += 1;
+        if front == arc && entry.is_none() {
+            entry = Some(last_speed);
+        }
+        if front == arc && sample.consumed > 0 {
+            exit = Some(sample.velocity);
+        }
+        last_speed = sample.velocity;
+        front += sample.consumed;
+        if sample.stopped_at == Some(1) {
+            break;
+        }
+    }
+    let (seg, after) = (&segments[arc], &segments[arc + 1]);
+    assert!(
+        matches!(after.shape, Shape::Blend(_)) && after.max_acceleration < 30.0,
+        "a slow blend after the arc: {after:?}"
+    );
+    let cap = seg.exit_velocity.min(after.max_velocity);
+    let (entry, exit) = (entry.unwrap(), exit.unwrap());
+    assert!(
+        exit >= 0.9 * cap,
+        "leaves the arc at {exit} mm/s, its exit cap {cap} mm/s"
+    );
+    let took = periods[arc] as f64 * planner.period;
+    let least = s_curve_time(
+        seg.length,
+        entry,
+        cap,
+        seg.max_velocity,
+        seg.max_acceleration,
+        seg.max_jerk,
+    );
+    assert!(
+        took <= least + 3.0 * planner.period,
+        "{took} s on the {} mm arc, {least} s as one S-curve from {entry} to {cap} mm/s",
+        seg.length
+    );
+    assert!(limit_use(text, planner) <= 1.0 + 1e-6);
+}

@@ -213,11 +213,24 @@ fn passes_below(v: f64, a: f64, limit: f64, dist: f64, amax: f64, jmax: f64) -> 
 /// `jmax`: the distance travelled by then, plus one period's travel (the
 /// motion steps whole periods, and a segment counts once this period can
 /// reach it), and whether the speed reaches zero first (braking).
+///
+/// Braking, the period's travel is at the speed the easing ends at, plus
+/// the most one period can add to it (J·T²/2, still decelerating at the
+/// limit with the jerk pushing back): the period that ends the easing is
+/// the last one the segment must not be reached in. Counted at the speed
+/// before braking, the check failed approaches into a slow blend that
+/// brake harder first and ease to zero right at its start.
 fn easing(v: f64, a: f64, limit: f64, jmax: f64, period: f64) -> (f64, bool) {
     let t = (a.abs() - limit) / jmax;
     let j = -jmax * a.signum();
-    let ease = v * t + a * t * t / 2.0 + j * t * t * t / 6.0 + (v + a.max(0.0) * t) * period;
-    (ease, a < 0.0 && v + a * t + j * t * t / 2.0 <= 0.0)
+    let v_end = v + a * t + j * t * t / 2.0;
+    let fastest = if a > 0.0 {
+        v + a * t
+    } else {
+        (v_end.max(0.0) + jmax * period * period / 2.0).min(v)
+    };
+    let ease = v * t + a * t * t / 2.0 + j * t * t * t / 6.0 + fastest * period;
+    (ease, a < 0.0 && v_end <= 0.0)
 }
 
 /// Whether deceleration `a` < 0 at speed `v`, eased off at once with jerk
@@ -961,6 +974,15 @@ impl Executor {
         // a hair under its entry) would have the whole approach brake
         // under the blend's limits.
         let mut met: Option<Met> = None;
+        // Segments from here on are entered past a cap the motion must
+        // brake to and is known to reach with zero acceleration (or is
+        // aimed at, failing this look ahead anyway): its approach eases
+        // any deceleration off before the cap, at a jerk that leaves the
+        // next segment's acceleration limit in its last period (`j_ease`),
+        // so easing the acceleration at once into their lower limits is
+        // no test of this state. It failed approaches that brake harder
+        // first and ease to zero right at a slow blend's start.
+        let mut eased_from: Option<usize> = None;
         let mut k = head;
         let zero = loop {
             let zero_here = match q.get(k).filter(|s| s.is_motion()) {
@@ -970,7 +992,10 @@ impl Executor {
                     if dist > stop_reach && !slower_ahead(q, k, dist, v, a, amax, jmax) {
                         break None;
                     }
-                    if k > head && a.abs() > seg.max_acceleration {
+                    if k > head
+                        && a.abs() > seg.max_acceleration
+                        && eased_from.is_none_or(|e| k < e)
+                    {
                         // The acceleration must be within this segment's
                         // limit by its start: ease it there with jerk J.
                         // Braking that comes to rest before the segment
@@ -1041,6 +1066,9 @@ impl Executor {
                             || met.is_some_and(|m| m.meets(limit, dist, j_ease))
                             || excepted(dist, limit);
                         if settles {
+                            if limit < v && eased_from.is_none() {
+                                eased_from = Some(k + 1);
+                            }
                             met = Some(Met::at(dist, limit));
                         } else if passes_below(v, a, limit, dist - margin, an, jn).is_some_and(
                             |(speed, acceleration)| {
@@ -1065,6 +1093,9 @@ impl Executor {
                                 amax,
                                 jmax: j_arrive,
                             });
+                            if limit < v && eased_from.is_none() {
+                                eased_from = Some(k + 1);
+                            }
                             met = Some(Met::at(dist, limit));
                         }
                     }
