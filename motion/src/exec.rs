@@ -2091,6 +2091,54 @@ mod tests {
         }
     }
 
+    /// `easing` against the motion it stands for, stepped finely: easing
+    /// a deceleration at once with the jerk limit until it is within the
+    /// limit, then a period more with the jerk still pushing (the fastest
+    /// the motion can go then), covers no more than the distance it gives,
+    /// for braking that would not run the speed out; and that distance is
+    /// never more than with the period at the speed before braking (the
+    /// old measure, which failed approaches into slow blends).
+    #[test]
+    fn easing_a_deceleration_counts_its_last_period_at_the_speed_it_ends_at() {
+        let (jmax, period) = (20_000.0, 0.001);
+        for &(v, a, limit) in &[
+            (14.0, -440.0, 25.0),
+            (13.1, -441.4, 25.3),
+            (40.0, -900.0, 100.0),
+            (2.0, -150.0, 20.0),
+            (3.0, -100.0, 5.0),
+            (5.0, -60.0, 59.0),
+            (0.5, -300.0, 10.0),
+        ] {
+            let (ease, runs_out) = easing(v, a, limit, jmax, period);
+            let t_ease = (a.abs() - limit) / jmax;
+            let steps = 200_000;
+            let h = (t_ease + period) / steps as f64;
+            let (mut s, mut sv, mut sa) = (0.0f64, v, a);
+            let (mut eased_at, mut stopped) = (None, false);
+            for k in 0..steps {
+                if eased_at.is_none() && k as f64 * h >= t_ease {
+                    eased_at = Some(s);
+                }
+                s += sv * h + sa * h * h / 2.0 + jmax * h * h * h / 6.0;
+                sv += sa * h + jmax * h * h / 2.0;
+                sa += jmax * h;
+                if eased_at.is_none() && sv <= 0.0 {
+                    stopped = true;
+                    break;
+                }
+            }
+            assert_eq!(runs_out, stopped, "{v} {a} {limit}");
+            if runs_out {
+                continue;
+            }
+            let eased_at = eased_at.unwrap();
+            assert!(ease >= s - 1e-12, "{v} {a} {limit}: {ease} < {s}");
+            let old = eased_at + v * period;
+            assert!(ease <= old + 1e-12, "{v} {a} {limit}: {ease} > {old}");
+        }
+    }
+
     /// From rest to a speed the jerk limit alone bounds (no acceleration
     /// limit reached), the law takes the time-optimal number of periods:
     /// the speed gains J·dt²·n² in n periods up and n down, so 50 mm/s at
