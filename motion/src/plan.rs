@@ -476,6 +476,22 @@ const TRAPEZOID_RAMPS: f64 = 16.0;
 /// How many corner blend legs are tried ([`corner_legs`]).
 const CORNER_TRIES: usize = 9;
 
+/// Lines whose directions' dot product is below this turn by more than
+/// 90°: a hairpin ([`hairpin`]).
+const HAIRPIN_COS: f64 = 0.0;
+
+/// Whether the corner from line `b` into line `c` is a hairpin, one a
+/// blend passes at a crawl and a stop often passes quicker: the blend
+/// into `b` then ends on `b` itself, with no curvature, not on the curve
+/// fitted through `b`'s midpoint, so that [`Planner::stops_sooner`] may
+/// still stop at the hairpin (a dense blend ends with the fit's
+/// curvature, and the line after it, were the motion to stop at its end,
+/// would start with a curvature jump). Both the planner and the blend
+/// worker ask it, so that they make the same blends.
+fn hairpin(b: &Programmed, c: &Programmed) -> bool {
+    (0..3).map(|i| b.direction[i] * c.direction[i]).sum::<f64>() < HAIRPIN_COS
+}
+
 /// The legs a corner blend tries, in order, until one is within the
 /// tolerance: `legs` (the tolerance's), then 0.7 times the one before.
 /// The planner and the blend worker both follow it.
@@ -1935,9 +1951,11 @@ impl<'k> Planner<'k> {
     }
 
     /// Whether stopping at the corner between the first two waiting lines
-    /// is quicker than the blend `chosen` through it. Not on a dense curve
-    /// (a blend taking half a line), only where both lines keep a stretch
-    /// of their own. Through a sharp corner under a small tolerance the
+    /// is quicker than the blend `chosen` through it. On a dense curve (a
+    /// blend taking half a line) only where the blend before, if it took
+    /// the first line's other half, ended on that line with no curvature
+    /// (the first line continues it; see [`hairpin`]). Through a sharp
+    /// corner under a small tolerance the
     /// blend's speed limit v is a few mm/s, and the ramps down to v and up
     /// from it take nearly as long as those to and from rest: a
     /// jerk-limited ramp ends in A/J of easing whatever speed it ends at.
@@ -1953,7 +1971,9 @@ impl<'k> Planner<'k> {
         };
         let (length_a, length_b) = (pa.length, pb.length);
         let (legs_a, legs_b) = chosen.legs;
-        if legs_a >= 0.999 * length_a / 2.0 || legs_b >= 0.999 * length_b / 2.0 {
+        let a = &self.pending[0];
+        let continues = a.start_leg < a.full_length() / 2.0 || a.mid[2] == [0.0; 3];
+        if !continues {
             return (false, None);
         }
         let length = chosen.blend.0.length();
@@ -2210,7 +2230,11 @@ impl<'k> Planner<'k> {
         } else {
             on_line(a, legs.0, true)?
         };
-        let b_consumed = legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b));
+        let b_consumed = legs.1 == half(b)
+            && legs_bc.is_some_and(|l| l.0 == half(b))
+            && !c
+                .and_then(|c| Some(hairpin(b.programmed()?, c.programmed()?)))
+                .unwrap_or(false);
         // The blend worker's, if it made it from this start: on a dense
         // curve, from a's fitted midpoint or from a corner's leg on a, or
         // at a corner from a leg on a (not from a's midpoint into a
@@ -2320,7 +2344,8 @@ impl<'k> Planner<'k> {
     #[cfg(test)]
     fn worked_here(&self) {
         if let Some(ahead) = &self.ahead {
-            ahead.worked_here(self.released + 1);
+            let after_stop = self.released > 0 && self.pending[0].start_leg == 0.0;
+            ahead.worked_here(self.released + 1, after_stop);
         }
     }
 
@@ -3137,6 +3162,15 @@ mod tests {
             mode: PathMode::Blend { tolerance },
             ..Default::default()
         };
+        planned_and_run_with(k, config, text)
+    }
+
+    /// [`planned_and_run`] under `config`.
+    fn planned_and_run_with(
+        k: &dyn Kinematics,
+        config: PlannerConfig,
+        text: &str,
+    ) -> (Vec<Segment>, f64, f64) {
         let segs = plan(k, config, text);
         let report = crate::offline::run(
             Interpreter::from_text(text, "t.ngc", Position::ZERO),
@@ -3315,19 +3349,31 @@ mod tests {
             }
             text += "M2\n";
             let tolerance = [0.005, 0.05, 0.5][case % 3];
-            let (segs, deviation, limits) = planned_and_run(&k, tolerance, &text);
+            // As planned, then blending every corner it can (no stops
+            // where they are quicker), which the count below is about.
+            let (planned, deviation, limits) = planned_and_run(&k, tolerance, &text);
             assert!(
                 deviation <= tolerance * (1.0 + 1e-9) && limits <= 1.0 + 1e-6,
                 "case {case} P{tolerance}: deviation {deviation}, limit use {limits}\n{text}"
+            );
+            let blending = PlannerConfig {
+                mode: PathMode::Blend { tolerance },
+                stop_when_quicker: false,
+                ..Default::default()
+            };
+            let (segs, deviation, limits) = planned_and_run_with(&k, blending, &text);
+            assert!(
+                deviation <= tolerance * (1.0 + 1e-9) && limits <= 1.0 + 1e-6,
+                "case {case} P{tolerance}, blending: deviation {deviation}, limit use {limits}\n{text}"
             );
             blends += segs
                 .iter()
                 .filter(|s| matches!(s.shape, Shape::Blend(_)))
                 .count();
-            for w in segs
-                .windows(2)
-                .filter(|w| w[0].is_motion() && w[1].is_motion())
-            {
+            for w in [&planned, &segs].into_iter().flat_map(|s| {
+                s.windows(2)
+                    .filter(|w| w[0].is_motion() && w[1].is_motion())
+            }) {
                 if w[0].exit_velocity > 0.0 && w[0].exit_velocity.is_finite() {
                     let (dt, _) = junction_steps(w);
                     assert!(

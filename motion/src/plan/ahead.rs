@@ -30,8 +30,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::{
-    blend_legs, blend_near, corner_legs, fitted_frame, frame_on, xyz_frame, Chord, FrameXyz,
-    PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
+    blend_legs, blend_near, corner_legs, fitted_frame, frame_on, hairpin, xyz_frame, Chord,
+    FrameXyz, PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -428,6 +428,10 @@ struct Tally {
     fitted: u64,
     /// Blends the planner worked out itself at the worker's junctions.
     own: u64,
+    /// Of those, the ones whose first move no blend took the start of
+    /// (the planner stopped at the corner before, which the worker,
+    /// without the path limits that decision needs, cannot foresee).
+    after_stop: u64,
 }
 
 impl Ahead {
@@ -473,9 +477,12 @@ impl Ahead {
     /// The planner worked out the blend at junction `index` itself
     /// (counted in the tally if it is the worker's; tests only).
     #[cfg(test)]
-    pub(super) fn worked_here(&self, index: u64) {
+    pub(super) fn worked_here(&self, index: u64, after_stop: bool) {
         if self.shared.takes(index) {
-            self.count(|t| t.own += 1);
+            self.count(|t| {
+                t.own += 1;
+                t.after_stop += u64::from(after_stop);
+            });
         }
     }
 
@@ -870,7 +877,9 @@ impl Worker {
         // either from a's fitted midpoint where the blend before took a's
         // other half, else from a leg on a.
         let (half_a, half_b) = (a.length / 2.0, b.length / 2.0);
-        let b_whole = legs.1 == half_b && legs_bc.is_some_and(|l| l.0 == half_b);
+        let b_whole = legs.1 == half_b
+            && legs_bc.is_some_and(|l| l.0 == half_b)
+            && !c.is_some_and(|(c, _)| hairpin(b, c));
         let a_whole = legs.0 == half_a;
         // Whether the blend before takes a's other half (if it is made):
         // then this one starts at a's fitted midpoint.
@@ -1009,6 +1018,11 @@ impl Worker {
                             from_midpoint: a_taken,
                         };
                         s.sampled = Some(Blend::sampled(control));
+                        // Taking b's whole half (before a hairpin), it
+                        // ends on b: the next blend starts there.
+                        if legs.1 == half_b {
+                            ended = Some((j, xyz_frame(&to)));
+                        }
                         break;
                     }
                 }
@@ -1252,7 +1266,12 @@ mod tests {
         assert!(alone == helped, "the worker changed the plan");
         eprintln!("stellabee1.ngc, first 20,000 lines: {t:?}");
         assert!(t.taken > 15_000, "{t:?}");
-        assert!(t.own as f64 <= 0.02 * t.taken as f64, "{t:?}");
+        // Blends right after a corner the planner chose to stop at are
+        // its own by design; they are a few per cent of stops.
+        assert!(
+            (t.own - t.after_stop) as f64 <= 0.02 * t.taken as f64,
+            "{t:?}"
+        );
     }
 
     #[test]
