@@ -1,4 +1,4 @@
-//! Corners on dense curves: where stopping at one is quicker than its
+//! Hairpins on dense curves: where stopping at one is quicker than its
 //! blend, the planner stops there, as it does at any corner between lines.
 
 use kerf_interp::{Interpreter, Position};
@@ -51,7 +51,7 @@ fn run(planner: PlannerConfig) -> offline::Report {
     .unwrap()
 }
 
-/// Of the corners a blend took the whole first half of the incoming move
+/// Of the hairpins a blend took the whole first half of the incoming move
 /// up to, the planner stops at some (the blend into that move then ends on
 /// it, straight: `hairpin` in `plan.rs`), and the stretch runs quicker than
 /// blending every corner, within the tolerance and the limits.
