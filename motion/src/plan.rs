@@ -2347,8 +2347,7 @@ impl<'k> Planner<'k> {
     #[cfg(test)]
     fn worked_here(&self) {
         if let Some(ahead) = &self.ahead {
-            let after_stop = self.released > 0 && self.pending[0].start_leg == 0.0;
-            ahead.worked_here(self.released + 1, after_stop);
+            ahead.worked_here(self.released + 1);
         }
     }
 
