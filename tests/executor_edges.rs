@@ -5,7 +5,7 @@
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::offline::{self, RunConfig};
 use kerf_motion::path::Shape;
-use kerf_motion::{Executor, PathMode, PlannerConfig};
+use kerf_motion::{Executor, PathMode, PlannerConfig, Segment};
 
 /// Largest use of any axis or joint velocity, acceleration or jerk limit
 /// when `text` runs on mill3 under `planner`.
@@ -19,6 +19,46 @@ fn limit_use(text: &str, planner: PlannerConfig) -> f64 {
     )
     .unwrap();
     report.max_limit_ratio()
+}
+
+/// How the executor spent its time on each segment of a run.
+#[derive(Clone, Copy, Debug, Default)]
+struct OnSegment {
+    /// Servo periods with the segment at the front of the queue.
+    periods: usize,
+    /// Speed entering it and leaving it, mm/s.
+    entry: f64,
+    exit: f64,
+}
+
+/// `text` planned on mill3 under the default planner and run through the
+/// executor on a virtual clock: the segments, and the run on each.
+fn run_by_segment(text: &str) -> (Vec<Segment>, Vec<OnSegment>) {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let planner = PlannerConfig::default();
+    let program = Interpreter::from_text(text, "stretch.ngc", Position::ZERO);
+    let segments =
+        offline::plan_program(program, &*machine.kinematics, Position::ZERO, planner, 1).unwrap();
+    let mut executor = Executor::new(Position::ZERO);
+    let mut runs = vec![OnSegment::default(); segments.len()];
+    let (mut front, mut speed) = (0, 0.0);
+    loop {
+        let sample = executor.tick(planner.period, &segments[front..], &[]);
+        let run = &mut runs[front.min(segments.len() - 1)];
+        if run.periods == 0 {
+            run.entry = speed;
+        }
+        run.periods += 1;
+        if sample.consumed > 0 {
+            run.exit = sample.velocity;
+        }
+        speed = sample.velocity;
+        front += sample.consumed;
+        if sample.stopped_at == Some(1) {
+            break;
+        }
+    }
+    (segments, runs)
 }
 
 /// stellabee1.ngc lines 941–958 with the default splits. Braking on one of
@@ -90,23 +130,8 @@ fn a_stop_aimed_on_a_slow_blend_brakes_under_the_lines_own_limits() {
         X0.5940 Z-0.2373\nX0.5980 Z-0.2353\nX0.6060 Z-0.2392\nX0.6100 Z-0.2363\n\
         X0.6160 Z-0.2373\nX0.6200 Z-0.2353\nX0.6320 Z-0.2379\nX0.6380 Z-0.2363\n\
         X0.6420 Z-0.2382\nX0.6640 Z-0.2383\nX0.6680 Z-0.2353\nM2\n";
-    let machine = kerf_machines::load("mill3").unwrap();
     let planner = PlannerConfig::default();
-    let program = Interpreter::from_text(text, "stretch.ngc", Position::ZERO);
-    let segments =
-        offline::plan_program(program, &*machine.kinematics, Position::ZERO, planner, 1).unwrap();
-    // Periods spent on each segment (the one at the front of the queue).
-    let mut executor = Executor::new(Position::ZERO);
-    let mut periods = vec![0usize; segments.len()];
-    let mut front = 0;
-    loop {
-        let sample = executor.tick(planner.period, &segments[front..], &[]);
-        periods[front.min(segments.len() - 1)] += 1;
-        front += sample.consumed;
-        if sample.stopped_at == Some(1) {
-            break;
-        }
-    }
+    let (segments, runs) = run_by_segment(text);
     let k = (1..segments.len())
         .find(|&k| {
             let s = &segments[k];
@@ -118,7 +143,7 @@ fn a_stop_aimed_on_a_slow_blend_brakes_under_the_lines_own_limits() {
         matches!(before.shape, Shape::Blend(_)) && before.max_velocity < 5.0,
         "a slow blend before it: {before:?}"
     );
-    let took = periods[k] as f64 * planner.period;
+    let took = runs[k].periods as f64 * planner.period;
     let least = 4.0 * (line.length / (2.0 * line.max_jerk)).cbrt();
     assert!(
         took <= least + 2.0 * planner.period,
@@ -187,47 +212,28 @@ fn an_approach_into_a_slow_blend_is_not_cut_off_by_the_segments_after_it() {
         G3 X1.2140 Y4.0580 Z-0.0585 I-0.1840 K0.0075\nG1 X1.2120 Z-0.0569\n\
         X1.2100 Z-0.0487\nX1.2080 Z-0.0252\nX1.2040 Z-0.0245\nX1.2020 Z-0.0114\n\
         X1.1940 Z-0.0098\nX1.1900 Z-0.0137\nX1.1880 Z-0.0075\nX1.1840 Z-0.0069\nM2\n";
-    let machine = kerf_machines::load("mill3").unwrap();
     let planner = PlannerConfig::default();
-    let program = Interpreter::from_text(text, "stretch.ngc", Position::ZERO);
-    let segments =
-        offline::plan_program(program, &*machine.kinematics, Position::ZERO, planner, 1).unwrap();
+    let (segments, runs) = run_by_segment(text);
     let arc = (0..segments.len())
         .find(|&k| segments[k].line == 26 && matches!(segments[k].shape, Shape::Arc(_)))
         .expect("the arc");
-    // Periods on each segment (the one at the front of the queue), and
-    // the speed as the motion leaves the arc and enters it.
-    let mut executor = Executor::new(Position::ZERO);
-    let mut periods = vec![0usize; segments.len()];
-    let (mut front, mut entry, mut exit) = (0, None, None);
-    let mut last_speed = 0.0;
-    loop {
-        let sample = executor.tick(planner.period, &segments[front..], &[]);
-        periods[front.min(segments.len() - 1)] += 1;
-        if front == arc && entry.is_none() {
-            entry = Some(last_speed);
-        }
-        if front == arc && sample.consumed > 0 {
-            exit = Some(sample.velocity);
-        }
-        last_speed = sample.velocity;
-        front += sample.consumed;
-        if sample.stopped_at == Some(1) {
-            break;
-        }
-    }
     let (seg, after) = (&segments[arc], &segments[arc + 1]);
     assert!(
         matches!(after.shape, Shape::Blend(_)) && after.max_acceleration < 30.0,
         "a slow blend after the arc: {after:?}"
     );
     let cap = seg.exit_velocity.min(after.max_velocity);
-    let (entry, exit) = (entry.unwrap(), exit.unwrap());
+    let OnSegment {
+        periods,
+        entry,
+        exit,
+    } = runs[arc];
+    assert!(periods > 0, "the arc was run");
     assert!(
         exit >= 0.9 * cap,
         "leaves the arc at {exit} mm/s, its exit cap {cap} mm/s"
     );
-    let took = periods[arc] as f64 * planner.period;
+    let took = periods as f64 * planner.period;
     let least = s_curve_time(
         seg.length,
         entry,

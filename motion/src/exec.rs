@@ -1065,36 +1065,37 @@ impl Executor {
                             || arrives
                             || met.is_some_and(|m| m.meets(limit, dist, j_ease))
                             || excepted(dist, limit);
-                        if settles {
-                            if limit < v && eased_from.is_none() {
-                                eased_from = Some(k + 1);
-                            }
-                            met = Some(Met::at(dist, limit));
-                        } else if passes_below(v, a, limit, dist - margin, an, jn).is_some_and(
-                            |(speed, acceleration)| {
-                                self.eases_in_time(
-                                    q,
-                                    k + 2,
-                                    margin + next_length,
-                                    limit,
-                                    speed,
-                                    acceleration,
-                                    jn,
-                                )
-                            },
-                        ) {
+                        let passes = !settles
+                            && passes_below(v, a, limit, dist - margin, an, jn).is_some_and(
+                                |(speed, acceleration)| {
+                                    self.eases_in_time(
+                                        q,
+                                        k + 2,
+                                        margin + next_length,
+                                        limit,
+                                        speed,
+                                        acceleration,
+                                        jn,
+                                    )
+                                },
+                            );
+                        if passes {
                             // Passed braking: the state there is not one
                             // with zero acceleration.
                             met = None;
                         } else {
-                            fail(Binding {
-                                dist,
-                                limit,
-                                amax,
-                                jmax: j_arrive,
-                            });
-                            if limit < v && eased_from.is_none() {
-                                eased_from = Some(k + 1);
+                            if !settles {
+                                fail(Binding {
+                                    dist,
+                                    limit,
+                                    amax,
+                                    jmax: j_arrive,
+                                });
+                            }
+                            // Reached with zero acceleration, or to be
+                            // aimed at so: braking to it eases off there.
+                            if limit < v {
+                                eased_from.get_or_insert(k + 1);
                             }
                             met = Some(Met::at(dist, limit));
                         }

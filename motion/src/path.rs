@@ -511,9 +511,9 @@ impl Blend {
     /// [`SAMPLES`] + 1 evenly spaced parameters, which the planner needs for
     /// its limits: one pass of polynomial evaluations gives both.
     ///
-    /// The arc lengths between samples only scale the rate of change of
-    /// curvature, which the planner pads by 25 % anyway; they agree with the
-    /// table to about 1e-8 of the length.
+    /// The arc lengths between samples (trapezoids with the end-derivative
+    /// correction) only scale the interval means of the curvature rate;
+    /// they agree with the table to about 1e-8 of the length.
     pub fn sampled(control: [Vec9; 6]) -> (Blend, BlendExtremes) {
         // The same code compiled for AVX where the processor has it: twice
         // the parameters per instruction. Without FMA every operation rounds
@@ -1593,11 +1593,10 @@ mod tests {
     #[test]
     fn sampled_curvature_rate_bounds_the_exact_one() {
         let mut rnd = crate::testkit::uniform(0x2545_f491_4f6c_dd1d);
-        let unit = random_unit;
         let mut worst: f64 = 0.0;
         for _ in 0..2000 {
-            let u_in: Vec9 = unit(&mut rnd);
-            let u_out: Vec9 = unit(&mut rnd);
+            let u_in: Vec9 = random_unit(&mut rnd);
+            let u_out: Vec9 = random_unit(&mut rnd);
             let cos = (0..3).map(|i| u_in[i] * u_out[i]).sum::<f64>();
             // The planner blends corners up to 150° (see plan.rs).
             if cos < -(3f64.sqrt() / 2.0) {
@@ -1616,11 +1615,10 @@ mod tests {
     #[test]
     fn sampled_curvature_rate_bounds_the_exact_one_on_curve_blends() {
         let mut rnd = crate::testkit::uniform(0x9e37_79b9_7f4a_7c15);
-        let unit = random_unit;
         let (mut worst, mut tested): (f64, usize) = (0.0, 0);
         while tested < 2000 {
-            let t0 = unit(&mut rnd);
-            let t1 = unit(&mut rnd);
+            let t0 = random_unit(&mut rnd);
+            let t1 = random_unit(&mut rnd);
             // Gentle turns only: the curve fit's pieces turn by a few
             // degrees, and past 60° the exact rate is sampled anyway.
             if (0..3).map(|i| t0[i] * t1[i]).sum::<f64>() < 0.6 {
@@ -1630,7 +1628,7 @@ mod tests {
             // End curvatures normal to the tangents, radii from a tenth of
             // the piece to a hundred times it.
             let bend = |t: &Vec9, rnd: &mut dyn FnMut() -> f64| {
-                let d = unit(rnd);
+                let d = random_unit(rnd);
                 let along: f64 = (0..3).map(|i| d[i] * t[i]).sum();
                 let n: Vec9 = std::array::from_fn(|i| d[i] - along * t[i]);
                 let size = norm(&n);

@@ -1956,11 +1956,12 @@ impl<'k> Planner<'k> {
     /// blend before, if it took the first line's other half, ended on that
     /// line with no curvature (the first line continues it). Judging every
     /// dense corner saved a little more (0.4 % on stellabee1.ngc) but cost
-    /// a tenth of the planning throughput. Through a sharp corner under a
-    /// small tolerance the
-    /// blend's speed limit v is a few mm/s, and the ramps down to v and up
-    /// from it take nearly as long as those to and from rest: a
-    /// jerk-limited ramp ends in A/J of easing whatever speed it ends at.
+    /// a tenth of the planning throughput.
+    ///
+    /// Through a sharp corner under a small tolerance the blend's speed
+    /// limit v is a few mm/s, and the ramps down to v and up from it take
+    /// nearly as long as those to and from rest: a jerk-limited ramp ends
+    /// in A/J of easing whatever speed it ends at.
     /// The comparison is [`line_time`] for both: each line taken as if
     /// the corner at its other end were alike (as on a zig-zag), half of
     /// its time charged to this corner. Also the blend's path limits,
@@ -2233,11 +2234,12 @@ impl<'k> Planner<'k> {
         } else {
             on_line(a, legs.0, true)?
         };
-        let b_consumed = legs.1 == half(b)
-            && legs_bc.is_some_and(|l| l.0 == half(b))
-            && !c
-                .and_then(|c| Some(hairpin(b.programmed()?, c.programmed()?)))
-                .unwrap_or(false);
+        let into_hairpin = match (b.programmed(), c.and_then(Pending::programmed)) {
+            (Some(b), Some(c)) => hairpin(b, c),
+            _ => false,
+        };
+        let b_consumed =
+            legs.1 == half(b) && legs_bc.is_some_and(|l| l.0 == half(b)) && !into_hairpin;
         // The blend worker's, if it made it from this start: on a dense
         // curve, from a's fitted midpoint or from a corner's leg on a, or
         // at a corner from a leg on a (not from a's midpoint into a

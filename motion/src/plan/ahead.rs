@@ -621,9 +621,10 @@ struct Worker {
     consumed: u64,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
-    /// Where the last dense blend worked out ended (X Y Z, at b's
-    /// midpoint: the fit's frame, or the fallback's), with its junction:
-    /// the blend after it starts there if the planner takes it.
+    /// Where the last blend worked out that took b's whole first half
+    /// ended (X Y Z, at b's midpoint: the fit's frame or the fallback's on
+    /// a dense curve, on b with no curvature before a hairpin), with its
+    /// junction: the blend after it starts there if the planner takes it.
     ended: Option<(u64, FrameXyz)>,
     /// The last junction worked out, with its legs and those of the
     /// junction after it (`blend_legs`, none where it gives none).
@@ -989,10 +990,6 @@ impl Worker {
                     fallback,
                 };
             } else {
-                s.worked = Worked::Corner {
-                    chosen: None,
-                    from_midpoint: a_taken,
-                };
                 // The planner's corner: from a's fitted midpoint these legs
                 // alone (the blend before fixed a's end); from a leg on a,
                 // the tolerance's legs, then shorter.
