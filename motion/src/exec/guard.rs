@@ -6,7 +6,7 @@
 //! (the rest of `exec.rs`). That look ahead is not recursively feasible: a
 //! state it accepts is not guaranteed a successor it accepts, and where
 //! none is found the motion breaks a limit (random programs found such
-//! states at a few in a hundred; `docs/motion.md`, *Known limits*). The
+//! states at a few in a hundred; `docs/motion-log.md`). The
 //! guard closes that hole by construction. A next state is taken only if a
 //! [`Guard`] from it exists: a chain of jerk-limited profiles ([`Brake`])
 //! that ends at rest, each passing every junction under its speed cap,
