@@ -13,7 +13,7 @@
 //! taken from the planner.
 //!
 //! `cargo test --release --test joint_sweep -- --ignored --nocapture`
-//! runs the full sweep (12 s of running); the suite runs a few programs of
+//! runs the full sweep (about 20 s); the suite runs a few programs of
 //! each machine.
 
 use kerf_interp::{Interpreter, Position};
@@ -85,10 +85,11 @@ fn slowed_joints(text: &str, factor: f64) -> String {
     out
 }
 
-fn machine(case: &Case) -> kerf_machines::Machine {
+/// `case`'s machine with its joints slowed by `slow`.
+fn machine(case: &Case, slow: f64) -> kerf_machines::Machine {
     let path = format!("{}/machines/{}.toml", env!("CARGO_MANIFEST_DIR"), case.name);
     let text = std::fs::read_to_string(&path).unwrap();
-    kerf_machines::from_toml(&slowed_joints(&text, case.slow), &path).unwrap()
+    kerf_machines::from_toml(&slowed_joints(&text, slow), &path).unwrap()
 }
 
 /// A random program inside `case`'s box from `home`, seeded by `seed`.
@@ -202,7 +203,14 @@ fn program(case: &Case, home: &Position, seed: u64) -> String {
             _ => {
                 t += &format!(
                     "{}\n",
-                    ["G64 P0.005", "G64 P0.01", "G64 P0.05", "G61", "G61.1"][rng.usize(..5)]
+                    [
+                        "G64 P0.005",
+                        "G64 P0.01",
+                        "G64 P0.05",
+                        "G64 P0.5",
+                        "G61",
+                        "G61.1"
+                    ][rng.usize(..6)]
                 );
             }
         }
@@ -237,10 +245,11 @@ fn run(machine: &kerf_machines::Machine, text: &str) -> Outcome {
 /// sampled joint and axis within its limits. Returns, per machine, how
 /// many ran and how many of those used a joint limit to at least 0.99
 /// (so the sweep tests joints that bind, not idle ones).
-fn sweep(programs: u64, verbose: bool) -> Vec<(&'static str, usize, usize)> {
+fn sweep(programs: u64, slow: Option<f64>, verbose: bool) -> Vec<(&'static str, usize, usize)> {
     let mut out = Vec::new();
     for case in &CASES {
-        let machine = machine(case);
+        let slow = slow.unwrap_or(case.slow);
+        let machine = machine(case, slow);
         let (mut ran, mut bound, mut refused) = (0, 0, 0);
         let (mut motion, mut takeovers) = (0.0, 0);
         for seed in 0..programs {
@@ -290,7 +299,7 @@ fn sweep(programs: u64, verbose: bool) -> Vec<(&'static str, usize, usize)> {
         }
         if verbose {
             println!(
-                "{}: {ran} programs ran ({refused} refused for reach), {bound} with a joint at 0.99 of a limit or more, {motion:.1} s of motion, {takeovers} guard takeovers",
+                "{} (joints at {slow} of their limits): {ran} programs ran ({refused} refused for reach), {bound} with a joint at 0.99 of a limit or more, {motion:.1} s of motion, {takeovers} guard takeovers",
                 case.name
             );
         }
@@ -301,7 +310,7 @@ fn sweep(programs: u64, verbose: bool) -> Vec<(&'static str, usize, usize)> {
 
 #[test]
 fn joints_of_parallel_and_hybrid_machines_stay_within_their_limits() {
-    for (name, ran, _) in sweep(3, false) {
+    for (name, ran, _) in sweep(3, None, false) {
         assert!(ran >= 2, "{name}: only {ran} of 3 programs ran");
     }
 }
@@ -309,12 +318,16 @@ fn joints_of_parallel_and_hybrid_machines_stay_within_their_limits() {
 #[test]
 #[ignore = "long sweep; run on demand in a release build"]
 fn joint_sweep() {
-    for (name, ran, bound) in sweep(60, true) {
-        assert!(ran >= 40, "{name}: only {ran} of 60 programs ran");
-        assert!(
-            bound >= ran / 4,
-            "{name}: the joints bound in only {bound} of {ran} programs"
-        );
+    // Slowed until the joints bind nearly everywhere, then half as slow,
+    // where the axes bind too.
+    for slow in [None, Some(0.5)] {
+        for (name, ran, bound) in sweep(60, slow, true) {
+            assert!(ran >= 40, "{name}: only {ran} of 60 programs ran");
+            assert!(
+                bound >= ran / 4,
+                "{name}: the joints bound in only {bound} of {ran} programs"
+            );
+        }
     }
 }
 
@@ -322,7 +335,7 @@ fn joint_sweep() {
 /// fifth of their limits): s3, the Y slider, as (velocity, acceleration,
 /// jerk) use.
 fn slider_s3(text: &str) -> [f64; 3] {
-    let machine = machine(&CASES[0]);
+    let machine = machine(&CASES[0], CASES[0].slow);
     let Outcome::Ran(report) = run(&machine, text) else {
         panic!("the program runs");
     };
