@@ -303,6 +303,11 @@ fn slower_ahead(q: View, k: usize, dist: f64, v: f64, a: f64, amax: f64, jmax: f
     false
 }
 
+/// Slowest mean speed, mm/s, at which a stop profile may cover the
+/// distance it adds to the shortest stop (`Brake::within`): below it the
+/// profile is a creep, not a stop.
+const CREEP_SPEED: f64 = 1e-3;
+
 /// Most of the lowest acceleration and jerk limits ahead that closing the
 /// last gap to a stop at once may show in the samples (`Executor::travel`).
 const SNAP_SHARE: f64 = 1e-5;
@@ -465,6 +470,15 @@ impl Brake {
                 }
                 _ => hi = mid,
             }
+        }
+        // Where easing the deceleration off alone brings the speed to rest
+        // (to a rounding residue), the only longer stops shed that residue
+        // at a vanishing peak: a stop a picometre past the shortest took
+        // 2000 s. The shortest, then, and the executor closes the gap at
+        // rest or moves on from there.
+        let extra = distance - shortest.length();
+        if v1 == 0.0 && extra < CREEP_SPEED * (best.duration() - shortest.duration()) {
+            return Some(shortest);
         }
         Some(best)
     }
