@@ -414,3 +414,36 @@ fn a_reader_that_stops_early_ends_kerf_quietly() {
         out.status
     );
 }
+
+/// `kerf plan --period-us` plans and measures at the servo period given.
+/// A line running on into a tangent arc under G61 keeps the curvature
+/// jump's cap v²·|Δκ| ≤ J·T: on mill3 (J = 75,000 mm/s³, R5) about
+/// 19.4 mm/s at 1 ms and half that at 250 µs, so the shorter period plans
+/// slower, by the time the slower junction costs. Out of range is refused.
+#[test]
+fn plan_takes_the_servo_period() {
+    let text = "G21 G90 G61\nG0 X10 Y10\nG1 X50 F6000\nG3 X50 Y20 J5\nM2\n";
+    let usual = plan_json(text);
+    let fine = plan_json_with(text, &["--period-us", "250"]);
+    let time = |j: &serde_json::Value| j["cycle_time_s"].as_f64().unwrap();
+    assert!(
+        time(&fine) > time(&usual) + 0.01,
+        "250 µs {} s against 1 ms {} s",
+        time(&fine),
+        time(&usual)
+    );
+    for report in [&usual, &fine] {
+        assert!(report["max_limit_ratio"].as_f64().unwrap() <= 1.0 + 1e-6);
+    }
+    // The samples are a quarter period apart: the cycle time is a whole
+    // number of 250 µs periods.
+    let periods = time(&fine) / 250e-6;
+    assert!((periods - periods.round()).abs() < 1e-6, "{periods}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "p.ngc", text);
+    let out = kerf(&["plan", &p, "--period-us", "100"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("250..=10000"), "{err}");
+}

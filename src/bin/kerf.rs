@@ -178,6 +178,11 @@ enum Cmd {
         /// acceleration mm/s², jerk mm/s³) instead of running the plan.
         #[arg(long)]
         segments: bool,
+        /// Servo period in microseconds (250 to 10000), as the daemon will
+        /// run it: limit use is measured on samples this far apart.
+        #[arg(long, value_name = "US", default_value_t = 1000,
+              value_parser = clap::value_parser!(u32).range(250..=10000))]
+        period_us: u32,
     },
     /// Run a program on the simulated machine (virtual clock): following
     /// and contour error, and the cutting force under force control.
@@ -470,12 +475,22 @@ fn main() -> ExitCode {
             plot,
             trapezoidal,
             segments,
+            period_us,
         } => {
             let tools = tool_table.as_deref();
+            let period = period_us as f64 * 1e-6;
             if segments {
-                cli::plan::segments(&file, &machine, tools)
+                cli::plan::segments(&file, &machine, tools, period)
             } else {
-                cli::plan::plan(&file, &machine, tools, plot.as_deref(), json, trapezoidal)
+                cli::plan::plan(
+                    &file,
+                    &machine,
+                    tools,
+                    plot.as_deref(),
+                    json,
+                    trapezoidal,
+                    period,
+                )
             }
         }
         Cmd::Kins {

@@ -69,11 +69,20 @@ pub fn check(
 
 /// `kerf plan --segments`: list the planned segments with their limits,
 /// to see what holds a program back.
-pub fn segments(file: &Path, machine: &str, tool_table: Option<&Path>) -> Result<(), Failure> {
+pub fn segments(
+    file: &Path,
+    machine: &str,
+    tool_table: Option<&Path>,
+    period: f64,
+) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
     let home = machine.home();
-    let mut planner = Planner::new(kins, home, PlannerConfig::default());
+    let config = PlannerConfig {
+        period,
+        ..PlannerConfig::default()
+    };
+    let mut planner = Planner::new(kins, home, config);
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut print = |seg: Option<kerf_motion::Segment>| -> std::io::Result<()> {
@@ -138,12 +147,14 @@ pub fn plan(
     plot: Option<&Path>,
     json_out: bool,
     trapezoidal: bool,
+    period: f64,
 ) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
     let config = RunConfig {
         planner: PlannerConfig {
             jerk_limited: !trapezoidal,
+            period,
             ..PlannerConfig::default()
         },
         record: if plot.is_some() { 2000 } else { 0 },
