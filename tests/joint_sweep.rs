@@ -12,8 +12,13 @@
 //! positions the executor commands (`kerf_motion::offline::run`), not
 //! taken from the planner.
 //!
+//! The same programs run on `mill3` (joints are its axes, at their own
+//! limits) at the daemon's finest servo period, 250 µs, where a period's
+//! travel is a sixty-fourth of a millisecond's in jerk terms (T³) and
+//! the picometres a stop lands off show.
+//!
 //! `cargo test --release --test joint_sweep -- --ignored --nocapture`
-//! runs the full sweep (about 20 s); the suite runs a few programs of
+//! runs the full sweep (about a minute); the suite runs a few programs of
 //! each machine.
 
 use kerf_interp::Interpreter;
@@ -91,6 +96,15 @@ fn machine(case: &Case, slow: f64) -> kerf_machines::Machine {
     let text = std::fs::read_to_string(&path).unwrap();
     kerf_machines::from_toml(&slowed_joints(&text, slow), &path).unwrap()
 }
+
+/// The embedded 3-axis mill, its joints at their own limits, in a box
+/// inside its travel.
+const MILL3: Case = Case {
+    name: "mill3",
+    slow: 1.0,
+    xyz: [(10.0, 290.0), (10.0, 190.0), (-90.0, -10.0)],
+    tilt: 0.0,
+};
 
 /// Path modes a program starts in and switches between.
 const MODES: [&str; 6] = [
@@ -242,13 +256,14 @@ fn run(machine: &kerf_machines::Machine, text: &str, period: f64) -> Outcome {
 /// many ran and how many of those used a joint limit to at least 0.99
 /// (so the sweep tests joints that bind, not idle ones).
 fn sweep(
+    cases: &[Case],
     programs: u64,
     slow: Option<f64>,
     period: f64,
     verbose: bool,
 ) -> Vec<(&'static str, usize, usize)> {
     let mut out = Vec::new();
-    for case in &CASES {
+    for case in cases {
         let slow = slow.unwrap_or(case.slow);
         let machine = machine(case, slow);
         let (mut ran, mut bound, mut refused) = (0, 0, 0);
@@ -312,22 +327,35 @@ fn sweep(
 
 #[test]
 fn joints_of_parallel_and_hybrid_machines_stay_within_their_limits() {
-    for (name, ran, _) in sweep(3, None, 0.001, false) {
+    for (name, ran, _) in sweep(&CASES, 3, None, 0.001, false) {
         assert!(ran >= 2, "{name}: only {ran} of 3 programs ran");
     }
+}
+
+#[test]
+fn mill3_at_the_finest_servo_period_stays_within_its_limits() {
+    let [(_, ran, _)] = sweep(&[MILL3], 2, None, 0.00025, false)[..] else {
+        unreachable!("one machine")
+    };
+    assert_eq!(ran, 2, "mill3 reaches its whole box");
 }
 
 #[test]
 #[ignore = "long sweep; run on demand in a release build"]
 fn joint_sweep() {
     // Slowed until the joints bind nearly everywhere, then half as slow,
-    // where the axes bind too; then at the daemon's finest servo period.
+    // where the axes bind too; then at the daemon's finest servo period,
+    // with ten times as many programs on mill3.
     for (programs, slow, period) in [
         (60, None, 0.001),
         (60, Some(0.5), 0.001),
         (20, None, 0.00025),
     ] {
-        for (name, ran, bound) in sweep(programs, slow, period, true) {
+        let mut runs = sweep(&CASES, programs, slow, period, true);
+        if period < 0.001 {
+            runs.extend(sweep(&[MILL3], 10 * programs, slow, period, true));
+        }
+        for (name, ran, bound) in runs {
             assert!(
                 ran as u64 >= programs * 2 / 3,
                 "{name}: only {ran} of {programs} programs ran"
@@ -407,4 +435,47 @@ fn a_fine_servo_period_does_not_creep_out_of_an_exact_stop() {
         (fine - usual).abs() < 0.01 * usual,
         "250 µs: {fine} s, 1 ms: {usual} s"
     );
+}
+
+/// The jerk use of `axis` running `text` on mill3 at 250 µs, every limit
+/// checked.
+fn jerk_on_mill3_at_250_us(text: &str, axis: &str) -> f64 {
+    let machine = machine(&MILL3, 1.0);
+    let Outcome::Ran(report) = run(&machine, text, 0.00025) else {
+        panic!("the program runs");
+    };
+    assert!(report.max_limit_ratio() <= ALLOWED, "{report:?}");
+    let limit = report.axes.iter().find(|a| a.name == axis).unwrap();
+    limit.jerk.ratio
+}
+
+/// Three chords of 0.116 mm under G61 at F6000 stop at each corner. The
+/// last braking period into the first stop was a tracking step that
+/// passed the corner at next to no speed and went on into the second
+/// chord with the jerk it had chosen under the first chord's limits; the
+/// second chord climbs Z more steeply, and Z ran 1.00055 times its jerk
+/// limit.
+#[test]
+fn a_stop_between_short_chords_keeps_to_the_jerk_limit_at_250_us() {
+    let z = jerk_on_mill3_at_250_us(
+        "G21 G90 G17 G61\nG0 X264.8128 Y55.4242 Z-63.3133\nG1 F6000\n\
+         X264.7229 Z-63.2405\nX264.6339 Z-63.1665\nX264.5458 Z-63.0914\nM2\n",
+        "Z",
+    );
+    assert!(z > 0.99, "Z's jerk limit binds braking into the stops: {z}");
+}
+
+/// A slow feed stopping at a sharp corner before a rapid (the corner
+/// under P0.005 is quicker stopped than blended). Its last braking step
+/// went on past the corner into the rapid, whose direction leans harder
+/// on X: X ran 1.002 times its jerk limit (found by the mill3 sweep).
+#[test]
+fn a_feed_stopping_before_a_rapid_keeps_to_the_jerk_limit_at_250_us() {
+    let x = jerk_on_mill3_at_250_us(
+        "G21 G90 G17 G64 P0.005\nG0 X288.3818 Y96.0854 Z-88.1698\n\
+         G1 X288.3818 Y91.8801 F3000\nG1 X217.6595 Y142.4664 Z-79.8646 F600\n\
+         G0 X101.7988 Y120.9953 Z-16.7924\nM2\n",
+        "X",
+    );
+    assert!(x > 0.99, "X's jerk limit binds: {x}");
 }

@@ -312,6 +312,15 @@ const CREEP_SPEED: f64 = 1e-3;
 /// last gap to a stop at once may show in the samples (`Executor::travel`).
 const SNAP_SHARE: f64 = 1e-5;
 
+/// Most of the jerk limit up to a stop that closing the last gap to it
+/// at once, in the period the motion comes to rest, may add to the jerk
+/// the samples show (`Executor::travel`): a jump of d straight after the
+/// last braking ramp reads up to 2·d/T³ on top of that ramp's jerk. At 1
+/// ms this allows the 10 pm that rounding leaves; at 250 µs a tenth of
+/// a picometre (a 5 pm jump read 1.000004 times the limit there), and a
+/// wider gap waits for the motion to rest (`SNAP_SHARE`).
+const JUMP_SHARE: f64 = 2e-7;
+
 /// A stop being played back is dropped (and tracking, then a fresh
 /// profile, take over) once the acceleration limit up to the stop is
 /// this many times the profile's peak deceleration: it was aimed under
@@ -1119,7 +1128,12 @@ impl Executor {
             };
             if zero_here {
                 let dist = dist.max(0.0);
-                if braking_distance(v, a, 0.0, amax, jmax) > dist + 1e-9
+                // Overrunning a stop by d shows as about d/T³ on the
+                // jerk of the ramp that lands there: the slack shrinks
+                // with the period (1.6e-11 mm at 1 ms on mill3, 2.5e-13
+                // at 250 µs).
+                let slack = (JUMP_SHARE * jmax * self.period.powi(3)).min(1e-9);
+                if braking_distance(v, a, 0.0, amax, jmax) > dist + slack
                     && !met.is_some_and(|m| m.meets(0.0, dist, f64::INFINITY))
                     && !excepted(dist, 0.0)
                 {
@@ -1606,6 +1620,12 @@ impl Executor {
         // clamp cut it short (entering a segment with a lower limit) or it
         // snaps to rest below.
         let mut within = self.keeps_jerk(a, jmax);
+        if v > 0.0 {
+            if let Some(landing) = self.lands_on_stop(q, head, ds, jmax) {
+                (ds, v, a) = (landing, 0.0, 0.0);
+                within = true;
+            }
+        }
         if v <= 0.0 {
             // Comes to rest within the period. If a jerk within the limit
             // brings speed and acceleration to zero together at τ = −2v/a,
@@ -1668,6 +1688,44 @@ impl Executor {
             }
             None => self.follow_guard(q, head, ds, v, a, consumed),
         }
+    }
+
+    /// Where a step `ds` long, which passes a point the motion must rest at
+    /// (a junction with no exit speed, or the last motion before a marker),
+    /// should rest there instead: the distance to that point if braking
+    /// from the current state with one jerk within `jmax` brings speed and
+    /// acceleration to zero together exactly there inside the period.
+    ///
+    /// A tracking step whose speed dips to nothing at such a junction
+    /// otherwise goes on past it with the jerk it chose under the limits up
+    /// to the stop, into a segment whose direction may allow less (at 250
+    /// µs, 1.002 times X's jerk limit going from a feed into a rapid).
+    fn lands_on_stop(&self, q: View, head: usize, ds: f64, jmax: f64) -> Option<f64> {
+        let (v0, a0, dt) = (self.v, self.a, self.period);
+        if a0 >= 0.0 || v0 <= 0.0 {
+            return None;
+        }
+        let mut to_stop = -self.s;
+        let mut k = head;
+        loop {
+            let seg = q.get(k).filter(|s| s.is_motion())?;
+            to_stop += seg.length;
+            if to_stop > ds {
+                return None;
+            }
+            if seg.exit_velocity == 0.0 || machine_cap_after(q, k) == 0.0 {
+                break;
+            }
+            k += 1;
+        }
+        let tau = -2.0 * v0 / a0;
+        let jerk = a0 * a0 / (2.0 * v0);
+        let landing = v0 * tau / 3.0;
+        // Within rounding of where the stop is: a jump of d at rest reads
+        // up to 2·d/T³ in the jerk.
+        let slack = JUMP_SHARE * jmax * dt * dt * dt;
+        (tau <= dt && jerk <= jmax * (1.0 + 1e-9) && (landing - to_stop).abs() <= slack)
+            .then_some(to_stop.max(0.0))
     }
 
     /// Whether a step this period to acceleration `a` keeps to jerk limit
@@ -2018,7 +2076,8 @@ impl Executor {
                 Some((_, amax, jmax)) if self.still >= 3 => (SNAP_SHARE * amax * t * t)
                     .min(SNAP_SHARE * jmax * t * t * t / 2.0)
                     .max(1e-8),
-                _ => 1e-8,
+                Some((_, _, jmax)) => (JUMP_SHARE * jmax * t * t * t).min(1e-8),
+                None => 1e-8,
             };
             if to_zero <= snap && !self.hold {
                 let mut left = to_zero;
