@@ -1722,8 +1722,9 @@ impl Executor {
         let jerk = a0 * a0 / (2.0 * v0);
         let landing = v0 * tau / 3.0;
         // Within rounding of where the stop is: a jump of d at rest reads
-        // up to 2·d/T³ in the jerk.
-        let slack = JUMP_SHARE * jmax * dt * dt * dt;
+        // up to 2·d/T³ in the jerk (without a jerk limit, the look ahead's
+        // own slack).
+        let slack = (JUMP_SHARE * jmax * dt * dt * dt).min(1e-9);
         (tau <= dt && jerk <= jmax * (1.0 + 1e-9) && (landing - to_stop).abs() <= slack)
             .then_some(to_stop.max(0.0))
     }
