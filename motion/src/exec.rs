@@ -316,9 +316,10 @@ const SNAP_SHARE: f64 = 1e-5;
 /// at once, in the period the motion comes to rest, may add to the jerk
 /// the samples show (`Executor::travel`): a jump of d straight after the
 /// last braking ramp reads up to 2·d/T³ on top of that ramp's jerk. At 1
-/// ms this allows the 10 pm that rounding leaves; at 250 µs a tenth of
-/// a picometre (a 5 pm jump read 1.000004 times the limit there), and a
-/// wider gap waits for the motion to rest (`SNAP_SHARE`).
+/// ms and mill3's jerk limits this allows the 10 pm that rounding leaves;
+/// at 250 µs a quarter of a picometre (a 5 pm jump read 1.000004 times
+/// the limit there), and a wider gap waits for the motion to rest
+/// (`SNAP_SHARE`).
 const JUMP_SHARE: f64 = 2e-7;
 
 /// A stop being played back is dropped (and tracking, then a fresh
@@ -1691,7 +1692,7 @@ impl Executor {
     }
 
     /// Where a step `ds` long, which passes a point the motion must rest at
-    /// (a junction with no exit speed, or the last motion before a marker),
+    /// (a junction with no exit speed, a marker, or the queue's end),
     /// should rest there instead: the distance to that point if braking
     /// from the current state with one jerk within `jmax` brings speed and
     /// acceleration to zero together exactly there inside the period.
