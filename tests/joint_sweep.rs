@@ -13,9 +13,9 @@
 //! taken from the planner.
 //!
 //! The same programs run on `mill3` (joints are its axes, at their own
-//! limits) at the daemon's finest servo period, 250 µs, where a period's
-//! travel is a sixty-fourth of a millisecond's in jerk terms (T³) and
-//! the picometres a stop lands off show.
+//! limits) at the daemon's finest servo period, 250 µs, where a position
+//! off by d reads d/T³ in the jerk, 64 times as much as at 1 ms: the
+//! picometres by which a stop lands off show there.
 //!
 //! `cargo test --release --test joint_sweep -- --ignored --nocapture`
 //! runs the full sweep (about a minute); the suite runs a few programs of
@@ -351,11 +351,19 @@ fn joint_sweep() {
         (60, Some(0.5), 0.001),
         (20, None, 0.00025),
     ] {
-        let mut runs = sweep(&CASES, programs, slow, period, true);
+        let mut runs: Vec<_> = sweep(&CASES, programs, slow, period, true)
+            .into_iter()
+            .map(|run| (programs, run))
+            .collect();
         if period < 0.001 {
-            runs.extend(sweep(&[MILL3], 10 * programs, slow, period, true));
+            let more = 10 * programs;
+            runs.extend(
+                sweep(&[MILL3], more, slow, period, true)
+                    .into_iter()
+                    .map(|run| (more, run)),
+            );
         }
-        for (name, ran, bound) in runs {
+        for (programs, (name, ran, bound)) in runs {
             assert!(
                 ran as u64 >= programs * 2 / 3,
                 "{name}: only {ran} of {programs} programs ran"
@@ -465,10 +473,10 @@ fn a_stop_between_short_chords_keeps_to_the_jerk_limit_at_250_us() {
     assert!(z > 0.99, "Z's jerk limit binds braking into the stops: {z}");
 }
 
-/// A slow feed stopping at a sharp corner before a rapid (the corner
-/// under P0.005 is quicker stopped than blended). Its last braking step
-/// went on past the corner into the rapid, whose direction leans harder
-/// on X: X ran 1.002 times its jerk limit (found by the mill3 sweep).
+/// A feed at F600 that the plan brings to rest at its end, before a
+/// rapid in another direction. Its last braking step went on past the
+/// corner into the rapid, whose direction leans harder on X: X ran 1.002
+/// times its jerk limit (found by the mill3 sweep).
 #[test]
 fn a_feed_stopping_before_a_rapid_keeps_to_the_jerk_limit_at_250_us() {
     let x = jerk_on_mill3_at_250_us(
