@@ -17,9 +17,13 @@
 //! off by d reads d/T³ in the jerk, 64 times as much as at 1 ms: the
 //! picometres by which a stop lands off show there.
 //!
+//! The same programs run again under a restless operator (feed holds,
+//! feed and rapid overrides), which no other sweep does on these
+//! machines.
+//!
 //! `cargo test --release --test joint_sweep -- --ignored --nocapture`
-//! runs the full sweep (about a minute); the suite runs a few programs of
-//! each machine.
+//! runs both sweeps (about three minutes); the suite runs a few programs
+//! of each machine.
 
 use kerf_interp::Interpreter;
 use kerf_motion::offline::{self, Report, RunConfig};
@@ -30,6 +34,7 @@ const ALLOWED: f64 = 1.0 + 1e-6;
 
 /// A machine to sweep: its embedded description with the joints slowed,
 /// and the box random programs stay in.
+#[derive(Clone, Copy)]
 struct Case {
     name: &'static str,
     /// Factor on every joint's speed and acceleration limit.
@@ -486,4 +491,198 @@ fn a_feed_stopping_before_a_rapid_keeps_to_the_jerk_limit_at_250_us() {
         "X",
     );
     assert!(x > 0.99, "X's jerk limit binds: {x}");
+}
+
+/// A restless operator, from a seed: on average every 0.3 s a feed hold
+/// of 0.05–0.4 s, a feed override from 0 to 200 % (0 % one time in five)
+/// or a rapid override from 0 to 100 %; all released after 20 s so the
+/// program ends.
+struct Operator {
+    rng: fastrand::Rng,
+    hold_until: f64,
+    /// Periods the motion spent braking for a hold.
+    held_moving: usize,
+}
+
+impl Operator {
+    fn act(&mut self, ex: &mut kerf_motion::Executor, time: f64, period: f64) {
+        if time >= 20.0 {
+            ex.set_hold(false);
+            ex.set_feed_override(1.0);
+            ex.set_rapid_override(1.0);
+            return;
+        }
+        if self.rng.f64() < period / 0.3 {
+            match self.rng.usize(..5) {
+                0 | 1 => self.hold_until = time + 0.05 + 0.35 * self.rng.f64(),
+                2 | 3 => ex.set_feed_override(if self.rng.usize(..5) == 0 {
+                    0.0
+                } else {
+                    2.0 * self.rng.f64()
+                }),
+                _ => ex.set_rapid_override(self.rng.f64()),
+            }
+        }
+        let hold = time < self.hold_until;
+        ex.set_hold(hold);
+        if hold && ex.velocity() > 0.0 {
+            self.held_moving += 1;
+        }
+    }
+}
+
+/// `text` on `machine` at `period` s under the operator of `seed`: the
+/// largest use of any axis's or joint's velocity, acceleration or jerk
+/// limit, by finite differences of the commanded positions and joints,
+/// where it was, and the periods spent braking for a hold; None if the planner
+/// refuses the program for reach.
+fn operated(
+    machine: &kerf_machines::Machine,
+    text: &str,
+    period: f64,
+    seed: u64,
+) -> Option<(f64, String, usize)> {
+    let kins = &*machine.kinematics;
+    let home = machine.home();
+    let config = PlannerConfig {
+        period,
+        ..PlannerConfig::default()
+    };
+    let program = Interpreter::from_text(text, "operated.ngc", home);
+    let segments = offline::plan_program(program, kins, home, config, 1).ok()?;
+    let mut queue: std::collections::VecDeque<_> = segments.into_iter().collect();
+    let mut ex = kerf_motion::Executor::new(home);
+    let mut operator = Operator {
+        rng: fastrand::Rng::with_seed(seed),
+        hold_until: 0.0,
+        held_moving: 0,
+    };
+    let (axes, joints) = (kins.axes(), kins.joints());
+    // The last four values of each axis, then each joint.
+    let mut last = vec![[0.0; 4]; axes.len() + joints.len()];
+    let mut worst = (0.0f64, String::new());
+    for tick in 0..(3000.0 / period) as usize {
+        let time = tick as f64 * period;
+        operator.act(&mut ex, time, period);
+        let (a, b) = queue.as_slices();
+        let sample = ex.tick(period, a, b);
+        queue.drain(..sample.consumed);
+        let p = sample.position.to_array();
+        let mut q = [0.0; kerf_motion::MAX_JOINTS];
+        kins.inverse(&sample.position, &mut q[..joints.len()])
+            .expect("the planner checked reach");
+        let values = axes
+            .iter()
+            .map(|a| (p[a.axis.index()], a.limits, a.axis.to_string()))
+            .chain(
+                joints
+                    .iter()
+                    .zip(q)
+                    .map(|(j, x)| (x, j.limits, j.name.clone())),
+            );
+        for ((x, limits, name), h) in values.zip(&mut last) {
+            *h = [x, h[0], h[1], h[2]];
+            if tick < 3 {
+                continue;
+            }
+            let uses = [
+                ("velocity", (h[0] - h[1]) / period / limits.max_velocity),
+                (
+                    "acceleration",
+                    (h[0] - 2.0 * h[1] + h[2]) / period.powi(2) / limits.max_acceleration,
+                ),
+                (
+                    "jerk",
+                    (h[0] - 3.0 * h[1] + 3.0 * h[2] - h[3]) / period.powi(3) / limits.max_jerk,
+                ),
+            ];
+            for (what, u) in uses {
+                if u.abs() > worst.0 {
+                    worst = (
+                        u.abs(),
+                        format!("{name} {what} at {time:.4} s, line {}", sample.line),
+                    );
+                }
+            }
+        }
+        if sample.stopped_at == Some(1) {
+            return Some((worst.0, worst.1, operator.held_moving));
+        }
+    }
+    panic!("did not finish within 3000 s:\n{text}");
+}
+
+/// Runs `programs` random programs on each of `cases` at `period` under
+/// a restless operator and checks every axis and joint within its
+/// limits. Returns, per machine, how many ran and in how many a limit
+/// bound (0.99 or more).
+fn operated_sweep(
+    cases: &[Case],
+    programs: u64,
+    period: f64,
+    verbose: bool,
+) -> Vec<(&'static str, usize, usize)> {
+    let mut out = Vec::new();
+    for case in cases {
+        let machine = machine(case, case.slow);
+        let (mut ran, mut bound, mut held) = (0, 0, 0);
+        for seed in 0..programs {
+            let text = program(case, 1000 * seed + 7);
+            let Some((worst, at, held_moving)) = operated(&machine, &text, period, seed) else {
+                continue;
+            };
+            assert!(
+                worst <= ALLOWED,
+                "{} seed {seed}, operated: {worst:.9} times a limit, {at}\n{text}",
+                case.name
+            );
+            ran += 1;
+            held += held_moving;
+            if worst >= 0.99 {
+                bound += 1;
+            }
+        }
+        if verbose {
+            println!(
+                "{} (joints at {} of their limits, period {} µs) under an operator: {ran} programs ran, {bound} with a limit bound, {:.1} s braking for holds",
+                case.name,
+                case.slow,
+                period * 1e6,
+                held as f64 * period
+            );
+        }
+        assert!(
+            held > 0,
+            "{}: the operator never stopped a moving machine",
+            case.name
+        );
+        out.push((case.name, ran, bound));
+    }
+    out
+}
+
+#[test]
+fn holds_and_overrides_keep_every_joint_within_its_limits() {
+    for (name, ran, _) in operated_sweep(&CASES, 2, 0.001, false) {
+        assert!(ran >= 1, "{name}: no program ran");
+    }
+}
+
+/// The random programs under a restless operator (feed holds, feed and
+/// rapid overrides) on every machine here, at 1 ms and 250 µs:
+/// `cargo test --release --test joint_sweep -- --ignored operated
+/// --nocapture`, about 2 minutes.
+#[test]
+#[ignore = "long sweep; run on demand in a release build"]
+fn operated_joint_sweep() {
+    let cases = [&CASES[..], &[MILL3]].concat();
+    for period in [0.001, 0.00025] {
+        for (name, ran, bound) in operated_sweep(&cases, 60, period, true) {
+            assert!(ran >= 40, "{name}: only {ran} of 60 programs ran");
+            assert!(
+                bound >= ran / 4,
+                "{name}: a limit bound in only {bound} of {ran}"
+            );
+        }
+    }
 }
