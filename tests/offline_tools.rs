@@ -447,3 +447,83 @@ fn plan_takes_the_servo_period() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("250..=10000"), "{err}");
 }
+
+/// On a deployed controller `kerf check`, `plan` and `sim` take the
+/// machine and servo period kerfd runs from its configuration file
+/// (`--config`; `/etc/kerf/kerf.toml` when it exists), flags still
+/// winning, and say so on stderr; a bad configuration is refused with the
+/// file and key.
+#[test]
+fn offline_tools_take_the_machine_and_period_from_kerfds_configuration() {
+    let dir = tempfile::tempdir().unwrap();
+    // Inside the O-X glide's travel (Z -355 .. -292), far below mill3's.
+    let p = program(
+        &dir,
+        "ox.ngc",
+        "G21 G90 G64 P0.01\nG0 X250 Y100 Z-320\nG1 X280 Y150 F3000\nG2 X280 Y200 J25\nM2\n",
+    );
+    let config = program(
+        &dir,
+        "kerf.toml",
+        "machine = \"oxglide-x\"\n[servo]\nperiod_us = 250\n",
+    );
+    let text = |out: &std::process::Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+
+    let configured = kerf(&["plan", &p, "--json", "--config", &config]);
+    let said = String::from_utf8_lossy(&configured.stderr).into_owned();
+    assert!(
+        said.contains("machine oxglide-x, servo period 250 µs from") && said.contains("kerf.toml"),
+        "{said}"
+    );
+    let explicit = kerf(&[
+        "plan",
+        &p,
+        "--json",
+        "--machine",
+        "oxglide-x",
+        "--period-us",
+        "250",
+    ]);
+    assert_eq!(text(&configured), text(&explicit));
+    // A flag wins over the file.
+    let coarse = kerf(&[
+        "plan",
+        &p,
+        "--json",
+        "--config",
+        &config,
+        "--period-us",
+        "1000",
+    ]);
+    let coarse_explicit = kerf(&["plan", &p, "--json", "--machine", "oxglide-x"]);
+    assert_eq!(text(&coarse), text(&coarse_explicit));
+    assert_ne!(
+        text(&coarse),
+        text(&configured),
+        "the period reaches the plan"
+    );
+
+    // Without the file, the simulated mill, whose travel refuses the program.
+    assert_eq!(kerf(&["check", &p]).status.code(), Some(1));
+    text(&kerf(&["check", &p, "--config", &config]));
+    assert!(
+        text(&kerf(&["sim", &p, "--config", &config])).contains("oxglide-x"),
+        "sim runs the configured machine"
+    );
+
+    let bad = program(&dir, "bad.toml", "[servo]\nperiod_us = 100\n");
+    let out = kerf(&["plan", &p, "--config", &bad]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.toml") && err.contains("servo.period_us") && err.contains("250 to 10000"),
+        "{err}"
+    );
+}

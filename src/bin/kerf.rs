@@ -150,9 +150,14 @@ enum Cmd {
     Check {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file.
-        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
+        /// Machine: embedded name or TOML file [default: kerfd's
+        /// configuration's, else mill3].
+        #[arg(long, value_name = "NAME|FILE")]
+        machine: Option<String>,
+        /// kerfd's configuration file, for the machine [default:
+        /// /etc/kerf/kerf.toml when it exists].
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -161,9 +166,14 @@ enum Cmd {
     Plan {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file.
-        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
+        /// Machine: embedded name or TOML file [default: kerfd's
+        /// configuration's, else mill3].
+        #[arg(long, value_name = "NAME|FILE")]
+        machine: Option<String>,
+        /// kerfd's configuration file, for the machine and servo period
+        /// [default: /etc/kerf/kerf.toml when it exists].
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -179,19 +189,25 @@ enum Cmd {
         #[arg(long)]
         segments: bool,
         /// Servo period in microseconds (250 to 10000), as the daemon will
-        /// run it: limit use is measured on samples this far apart.
-        #[arg(long, value_name = "US", default_value_t = 1000,
+        /// run it: limit use is measured on samples this far apart
+        /// [default: kerfd's configuration's, else 1000].
+        #[arg(long, value_name = "US",
               value_parser = clap::value_parser!(u32).range(250..=10000))]
-        period_us: u32,
+        period_us: Option<u32>,
     },
     /// Run a program on the simulated machine (virtual clock): following
     /// and contour error, and the cutting force under force control.
     Sim {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file.
-        #[arg(long, default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
+        /// Machine: embedded name or TOML file [default: kerfd's
+        /// configuration's, else mill3].
+        #[arg(long, value_name = "NAME|FILE")]
+        machine: Option<String>,
+        /// kerfd's configuration file, for the machine and servo period
+        /// [default: /etc/kerf/kerf.toml when it exists].
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -209,10 +225,11 @@ enum Cmd {
         /// program's force-control M-code will do).
         #[arg(long, value_name = "N")]
         force: Option<f64>,
-        /// Servo period in microseconds (250 to 10000).
-        #[arg(long, value_name = "US", default_value_t = 1000,
+        /// Servo period in microseconds (250 to 10000) [default: kerfd's
+        /// configuration's, else 1000].
+        #[arg(long, value_name = "US",
               value_parser = clap::value_parser!(u32).range(250..=10000))]
-        period_us: u32,
+        period_us: Option<u32>,
     },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
@@ -334,6 +351,7 @@ fn main() -> ExitCode {
         Cmd::Sim {
             file,
             machine,
+            config,
             tool_table,
             plot,
             no_feedforward,
@@ -347,24 +365,26 @@ fn main() -> ExitCode {
                     "--force takes a force in N above 0".into(),
                 ))
             } else {
-                let options = kerf::simulate::SimOptions {
-                    period: period_us as f64 * 1e-6,
-                    feedforward: !no_feedforward,
-                    plant: Some(match plant {
-                        PlantArg::Ideal => kerf_io::sim::Plant::Ideal,
-                        PlantArg::Identified => kerf_io::sim::Plant::Identified,
-                    }),
-                    force_target: force,
-                    ..Default::default()
-                };
-                cli::sim::sim(
-                    &file,
-                    &machine,
-                    tool_table.as_deref(),
-                    options,
-                    plot.as_deref(),
-                    json,
-                )
+                cli::Target::resolve(machine, period_us, config.as_deref()).and_then(|target| {
+                    let options = kerf::simulate::SimOptions {
+                        period: target.period(),
+                        feedforward: !no_feedforward,
+                        plant: Some(match plant {
+                            PlantArg::Ideal => kerf_io::sim::Plant::Ideal,
+                            PlantArg::Identified => kerf_io::sim::Plant::Identified,
+                        }),
+                        force_target: force,
+                        ..Default::default()
+                    };
+                    cli::sim::sim(
+                        &file,
+                        &target.machine,
+                        tool_table.as_deref(),
+                        options,
+                        plot.as_deref(),
+                        json,
+                    )
+                })
             }
         }
         Cmd::Watch { rate } => cli::watch::watch(socket, rate, json),
@@ -466,25 +486,28 @@ fn main() -> ExitCode {
         Cmd::Check {
             file,
             machine,
+            config,
             tool_table,
-        } => cli::plan::check(&file, &machine, tool_table.as_deref(), json),
+        } => cli::Target::machine(machine, config.as_deref())
+            .and_then(|m| cli::plan::check(&file, &m, tool_table.as_deref(), json)),
         Cmd::Plan {
             file,
             machine,
+            config,
             tool_table,
             plot,
             trapezoidal,
             segments,
             period_us,
-        } => {
+        } => cli::Target::resolve(machine, period_us, config.as_deref()).and_then(|target| {
             let tools = tool_table.as_deref();
-            let period = period_us as f64 * 1e-6;
+            let (machine, period) = (&target.machine, target.period());
             if segments {
-                cli::plan::segments(&file, &machine, tools, period)
+                cli::plan::segments(&file, machine, tools, period)
             } else {
                 cli::plan::plan(
                     &file,
-                    &machine,
+                    machine,
                     tools,
                     plot.as_deref(),
                     json,
@@ -492,7 +515,7 @@ fn main() -> ExitCode {
                     period,
                 )
             }
-        }
+        }),
         Cmd::Kins {
             machine,
             no_limits,

@@ -190,14 +190,15 @@ pub fn plan(
         return Ok(());
     }
     // A closed pipe (`| head`) ends the output quietly.
-    let _ = print_report(&machine.description.name, &report);
+    let _ = print_report(&machine.description.name, period, &report);
     Ok(())
 }
 
-fn print_report(machine: &str, report: &Report) -> std::io::Result<()> {
+fn print_report(machine: &str, period: f64, report: &Report) -> std::io::Result<()> {
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     writeln!(out, "machine          {machine}")?;
+    writeln!(out, "servo period     {:.0} µs", period * 1e6)?;
     writeln!(out, "cycle time       {:.3} s", report.cycle_time)?;
     writeln!(out, "segments         {}", report.segments)?;
     writeln!(
