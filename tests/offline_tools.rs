@@ -517,6 +517,10 @@ fn offline_tools_take_the_machine_and_period_from_kerfds_configuration() {
         text(&kerf(&["sim", &p, "--config", &config])).contains("oxglide-x"),
         "sim runs the configured machine"
     );
+    let joints = text(&kerf(&[
+        "kins", "--config", &config, "inverse", "250", "0", "-300",
+    ]));
+    assert!(joints.contains("s1"), "the O-X glide's sliders: {joints}");
 
     let bad = program(&dir, "bad.toml", "[servo]\nperiod_us = 100\n");
     let out = kerf(&["plan", &p, "--config", &bad]);

@@ -233,9 +233,14 @@ enum Cmd {
     },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
-        /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5) or a TOML file.
-        #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
+        /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5)
+        /// or a TOML file [default: kerfd's configuration's, else mill3].
+        #[arg(long, value_name = "NAME|FILE")]
+        machine: Option<String>,
+        /// kerfd's configuration file, for the machine [default:
+        /// /etc/kerf/kerf.toml when it exists].
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// Do not check axis travel and joint strokes (reach is still checked).
         #[arg(long)]
         no_limits: bool,
@@ -244,9 +249,14 @@ enum Cmd {
     },
     /// Compute and plot the reachable workspace of a machine, offline.
     Workspace {
-        /// Machine: an embedded name or a TOML file.
-        #[arg(long, value_name = "NAME|FILE", default_value = kerf_machines::DEFAULT_MACHINE)]
-        machine: String,
+        /// Machine: an embedded name or a TOML file [default: kerfd's
+        /// configuration's, else mill3].
+        #[arg(long, value_name = "NAME|FILE")]
+        machine: Option<String>,
+        /// kerfd's configuration file, for the machine [default:
+        /// /etc/kerf/kerf.toml when it exists].
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
         /// Draw the workspace into this SVG file.
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
@@ -518,9 +528,10 @@ fn main() -> ExitCode {
         }),
         Cmd::Kins {
             machine,
+            config,
             no_limits,
             direction,
-        } => {
+        } => cli::Target::machine(machine, config.as_deref()).and_then(|machine| {
             let (direction, values) = match direction {
                 KinsDirection::Inverse { values } => (cli::kins::Direction::Inverse, values),
                 KinsDirection::Forward { values } => (cli::kins::Direction::Forward, values),
@@ -532,8 +543,13 @@ fn main() -> ExitCode {
                 json,
                 no_limits,
             })
-        }
-        Cmd::Workspace { machine, plot } => cli::workspace::workspace(&machine, plot.as_deref()),
+        }),
+        Cmd::Workspace {
+            machine,
+            config,
+            plot,
+        } => cli::Target::machine(machine, config.as_deref())
+            .and_then(|machine| cli::workspace::workspace(&machine, plot.as_deref())),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -48,8 +48,8 @@ impl From<ClientError> for Failure {
     }
 }
 
-/// The machine and servo period an offline tool (`check`, `plan`, `sim`)
-/// works on.
+/// The machine and servo period an offline tool (`check`, `plan`, `sim`,
+/// `kins`, `workspace`) works on.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Target {
     /// Machine: embedded name or TOML file.
