@@ -105,6 +105,17 @@ pub struct Tcp {
 }
 
 impl Config {
+    /// The configuration kerfd runs with: `explicit` (its `--config`), else
+    /// [`SYSTEM_CONFIG`] when it exists, read and checked; with the file
+    /// it came from, or None (and the defaults) when there is none.
+    pub fn find(explicit: Option<&Path>) -> Result<(Config, Option<PathBuf>), ConfigError> {
+        let system = Path::new(SYSTEM_CONFIG);
+        match explicit.or_else(|| system.exists().then_some(system)) {
+            Some(path) => Ok((Config::load(path)?, Some(path.to_path_buf()))),
+            None => Ok((Config::default(), None)),
+        }
+    }
+
     /// Read and check `path`.
     pub fn load(path: &Path) -> Result<Config, ConfigError> {
         let file = path.display().to_string();

@@ -150,14 +150,8 @@ enum Cmd {
     Check {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file [default: kerfd's
-        /// configuration's, else mill3].
-        #[arg(long, value_name = "NAME|FILE")]
-        machine: Option<String>,
-        /// kerfd's configuration file, for the machine [default:
-        /// /etc/kerf/kerf.toml when it exists].
-        #[arg(long, value_name = "FILE")]
-        config: Option<PathBuf>,
+        #[command(flatten)]
+        on: MachineArgs,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -166,14 +160,8 @@ enum Cmd {
     Plan {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file [default: kerfd's
-        /// configuration's, else mill3].
-        #[arg(long, value_name = "NAME|FILE")]
-        machine: Option<String>,
-        /// kerfd's configuration file, for the machine and servo period
-        /// [default: /etc/kerf/kerf.toml when it exists].
-        #[arg(long, value_name = "FILE")]
-        config: Option<PathBuf>,
+        #[command(flatten)]
+        on: MachineArgs,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -200,14 +188,8 @@ enum Cmd {
     Sim {
         /// The program file.
         file: PathBuf,
-        /// Machine: embedded name or TOML file [default: kerfd's
-        /// configuration's, else mill3].
-        #[arg(long, value_name = "NAME|FILE")]
-        machine: Option<String>,
-        /// kerfd's configuration file, for the machine and servo period
-        /// [default: /etc/kerf/kerf.toml when it exists].
-        #[arg(long, value_name = "FILE")]
-        config: Option<PathBuf>,
+        #[command(flatten)]
+        on: MachineArgs,
         /// LinuxCNC tool table file (.tbl) for the program's T words.
         #[arg(long, value_name = "FILE")]
         tool_table: Option<PathBuf>,
@@ -233,14 +215,8 @@ enum Cmd {
     },
     /// Joints for a pose (inverse) or the pose for joints (forward), offline.
     Kins {
-        /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5)
-        /// or a TOML file [default: kerfd's configuration's, else mill3].
-        #[arg(long, value_name = "NAME|FILE")]
-        machine: Option<String>,
-        /// kerfd's configuration file, for the machine [default:
-        /// /etc/kerf/kerf.toml when it exists].
-        #[arg(long, value_name = "FILE")]
-        config: Option<PathBuf>,
+        #[command(flatten)]
+        on: MachineArgs,
         /// Do not check axis travel and joint strokes (reach is still checked).
         #[arg(long)]
         no_limits: bool,
@@ -249,18 +225,34 @@ enum Cmd {
     },
     /// Compute and plot the reachable workspace of a machine, offline.
     Workspace {
-        /// Machine: an embedded name or a TOML file [default: kerfd's
-        /// configuration's, else mill3].
-        #[arg(long, value_name = "NAME|FILE")]
-        machine: Option<String>,
-        /// kerfd's configuration file, for the machine [default:
-        /// /etc/kerf/kerf.toml when it exists].
-        #[arg(long, value_name = "FILE")]
-        config: Option<PathBuf>,
+        #[command(flatten)]
+        on: MachineArgs,
         /// Draw the workspace into this SVG file.
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
     },
+}
+
+/// Which machine an offline tool works on, and where kerfd's settings are.
+#[derive(clap::Args, Debug)]
+struct MachineArgs {
+    /// Machine: an embedded name (mill3, oxglide-x, oxglide-o, rfmt5, ...)
+    /// or a TOML file [default: kerfd's configuration's, else mill3].
+    #[arg(long, value_name = "NAME|FILE")]
+    machine: Option<String>,
+    /// kerfd's configuration file, for the machine and, where the tool
+    /// runs the servo, its period [default: /etc/kerf/kerf.toml when it
+    /// exists].
+    #[arg(long, value_name = "FILE")]
+    config: Option<PathBuf>,
+}
+
+impl MachineArgs {
+    /// The machine and servo period these flags, the configuration and
+    /// the defaults give ([`cli::Target::resolve`]).
+    fn resolve(self, period_us: Option<u32>, runs_servo: bool) -> Result<cli::Target, Failure> {
+        cli::Target::resolve(self.machine, period_us, runs_servo, self.config.as_deref())
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -360,8 +352,7 @@ fn main() -> ExitCode {
         },
         Cmd::Sim {
             file,
-            machine,
-            config,
+            on,
             tool_table,
             plot,
             no_feedforward,
@@ -375,7 +366,7 @@ fn main() -> ExitCode {
                     "--force takes a force in N above 0".into(),
                 ))
             } else {
-                cli::Target::resolve(machine, period_us, config.as_deref()).and_then(|target| {
+                on.resolve(period_us, true).and_then(|target| {
                     let options = kerf::simulate::SimOptions {
                         period: target.period(),
                         feedforward: !no_feedforward,
@@ -495,21 +486,20 @@ fn main() -> ExitCode {
         ),
         Cmd::Check {
             file,
-            machine,
-            config,
+            on,
             tool_table,
-        } => cli::Target::machine(machine, config.as_deref())
-            .and_then(|m| cli::plan::check(&file, &m, tool_table.as_deref(), json)),
+        } => on
+            .resolve(None, false)
+            .and_then(|t| cli::plan::check(&file, &t.machine, tool_table.as_deref(), json)),
         Cmd::Plan {
             file,
-            machine,
-            config,
+            on,
             tool_table,
             plot,
             trapezoidal,
             segments,
             period_us,
-        } => cli::Target::resolve(machine, period_us, config.as_deref()).and_then(|target| {
+        } => on.resolve(period_us, true).and_then(|target| {
             let tools = tool_table.as_deref();
             let (machine, period) = (&target.machine, target.period());
             if segments {
@@ -527,29 +517,25 @@ fn main() -> ExitCode {
             }
         }),
         Cmd::Kins {
-            machine,
-            config,
+            on,
             no_limits,
             direction,
-        } => cli::Target::machine(machine, config.as_deref()).and_then(|machine| {
+        } => on.resolve(None, false).and_then(|target| {
             let (direction, values) = match direction {
                 KinsDirection::Inverse { values } => (cli::kins::Direction::Inverse, values),
                 KinsDirection::Forward { values } => (cli::kins::Direction::Forward, values),
             };
             cli::kins::kins(&cli::kins::Request {
-                machine,
+                machine: target.machine,
                 direction,
                 values,
                 json,
                 no_limits,
             })
         }),
-        Cmd::Workspace {
-            machine,
-            config,
-            plot,
-        } => cli::Target::machine(machine, config.as_deref())
-            .and_then(|machine| cli::workspace::workspace(&machine, plot.as_deref())),
+        Cmd::Workspace { on, plot } => on
+            .resolve(None, false)
+            .and_then(|t| cli::workspace::workspace(&t.machine, plot.as_deref())),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

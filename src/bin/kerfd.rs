@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::Parser;
-use kerf::config::{self, Config};
+use kerf::config::Config;
 use kerf::daemon::{bind_socket, Daemon, Options};
 use kerf::servo::{Pacing, RealTime};
 use kerf::systemd;
@@ -65,14 +65,11 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    let (config, config_name) = match &args.config {
-        Some(path) => (Config::load(path)?, path.display().to_string()),
-        None if std::path::Path::new(config::SYSTEM_CONFIG).exists() => (
-            Config::load(std::path::Path::new(config::SYSTEM_CONFIG))?,
-            config::SYSTEM_CONFIG.to_string(),
-        ),
-        None => (Config::default(), "(no configuration file)".to_string()),
-    };
+    let (config, file) = Config::find(args.config.as_deref())?;
+    let config_name = file.map_or_else(
+        || "(no configuration file)".to_string(),
+        |f| f.display().to_string(),
+    );
     let tcp = config.tcp(&config_name)?;
     let socket = args
         .socket

@@ -59,63 +59,45 @@ pub struct Target {
 }
 
 impl Target {
-    /// The flags where given, else kerfd's configuration (`config`, else
-    /// [`SYSTEM_CONFIG`](crate::config::SYSTEM_CONFIG) when it exists),
-    /// else mill3 at 1 ms: on a deployed controller `kerf check prog.ngc`
-    /// checks the machine kerfd runs, at the period it runs, not the
-    /// simulated mill. Says on stderr what the configuration supplied.
+    /// The flags where given, else kerfd's configuration
+    /// ([`Config::find`](crate::config::Config::find): `config`, else
+    /// `/etc/kerf/kerf.toml` when it exists), else mill3 at 1 ms: on a
+    /// deployed controller `kerf check prog.ngc` checks the machine kerfd
+    /// runs, at the period it runs, not the simulated mill. Only a tool
+    /// that `runs_servo` takes the period from the file. Says on stderr
+    /// what the file supplied.
     pub fn resolve(
         machine: Option<String>,
         period_us: Option<u32>,
+        runs_servo: bool,
         config: Option<&Path>,
     ) -> Result<Target, Failure> {
-        Target::from_flags(machine, Some(period_us), config)
-    }
-
-    /// [`resolve`](Self::resolve) for a tool that needs no servo period:
-    /// the machine alone.
-    pub fn machine(machine: Option<String>, config: Option<&Path>) -> Result<String, Failure> {
-        Ok(Target::from_flags(machine, None, config)?.machine)
-    }
-
-    /// `period_us` is None for a tool that does not run the servo.
-    fn from_flags(
-        machine: Option<String>,
-        period_us: Option<Option<u32>>,
-        config: Option<&Path>,
-    ) -> Result<Target, Failure> {
-        use crate::config::{Config, SYSTEM_CONFIG};
-        let wants_period = period_us.is_some();
-        let period_us = period_us.flatten();
-        let system = Path::new(SYSTEM_CONFIG);
-        let file = config.or_else(|| system.exists().then_some(system));
-        let loaded = match file {
-            // Everything given: the configuration has nothing to add.
-            _ if machine.is_some() && (period_us.is_some() || !wants_period) => None,
-            Some(f) => Some(Config::load(f).map_err(|e| {
+        let settled = machine.is_some() && (period_us.is_some() || !runs_servo);
+        let (file, path) = if settled {
+            (Default::default(), None)
+        } else {
+            crate::config::Config::find(config).map_err(|e| {
                 Failure::new(format!(
                     "{e} (kerfd's configuration, read for the machine and servo period: fix it, or give the flags it would supply)"
                 ))
-            })?),
-            None => None,
+            })?
         };
-        let file_machine = loaded
-            .as_ref()
-            .and_then(|c| c.machine.clone())
-            .filter(|_| machine.is_none());
-        let file_period = loaded
-            .as_ref()
-            .and_then(|c| c.servo.period_us)
-            .filter(|_| wants_period && period_us.is_none());
-        if let (Some(f), true) = (file, file_machine.is_some() || file_period.is_some()) {
-            let mut took = Vec::new();
-            if let Some(m) = &file_machine {
-                took.push(format!("machine {m}"));
+        let file_machine = file.machine.filter(|_| machine.is_none());
+        let file_period = file
+            .servo
+            .period_us
+            .filter(|_| runs_servo && period_us.is_none());
+        if let Some(path) = path {
+            let took: Vec<String> = [
+                file_machine.as_ref().map(|m| format!("machine {m}")),
+                file_period.map(|p| format!("servo period {p} µs")),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            if !took.is_empty() {
+                eprintln!("kerf: {} from {}", took.join(", "), path.display());
             }
-            if let Some(p) = file_period {
-                took.push(format!("servo period {p} µs"));
-            }
-            eprintln!("kerf: {} from {}", took.join(", "), f.display());
         }
         Ok(Target {
             machine: machine
