@@ -322,6 +322,20 @@ const SNAP_SHARE: f64 = 1e-5;
 /// (`SNAP_SHARE`).
 const JUMP_SHARE: f64 = 2e-7;
 
+/// How far, mm, braking may land from a stop it aims at under jerk limit
+/// `jmax` at servo period `period` and still count as landing on it:
+/// [`JUMP_SHARE`] of J·T³ (16 pm at 1 ms on mill3, 0.25 pm at 250 µs),
+/// and never more than 1 nm (without a jerk limit, that alone).
+fn stop_slack(jmax: f64, period: f64) -> f64 {
+    (JUMP_SHARE * jmax * period * period * period).min(1e-9)
+}
+
+/// Whether the motion must be at rest at the end of segment `k` of `q`:
+/// the plan stops there, or a marker or the queue's end follows.
+fn rests_after(q: View, k: usize) -> bool {
+    q.get(k).is_some_and(|seg| seg.exit_velocity == 0.0) || machine_cap_after(q, k) == 0.0
+}
+
 /// A stop being played back is dropped (and tracking, then a fresh
 /// profile, take over) once the acceleration limit up to the stop is
 /// this many times the profile's peak deceleration: it was aimed under
@@ -1130,10 +1144,8 @@ impl Executor {
             if zero_here {
                 let dist = dist.max(0.0);
                 // Overrunning a stop by d shows as about d/T³ on the
-                // jerk of the ramp that lands there: the slack shrinks
-                // with the period (1.6e-11 mm at 1 ms on mill3, 2.5e-13
-                // at 250 µs).
-                let slack = (JUMP_SHARE * jmax * self.period.powi(3)).min(1e-9);
+                // jerk of the ramp that lands there.
+                let slack = stop_slack(jmax, self.period);
                 if braking_distance(v, a, 0.0, amax, jmax) > dist + slack
                     && !met.is_some_and(|m| m.meets(0.0, dist, f64::INFINITY))
                     && !excepted(dist, 0.0)
@@ -1304,8 +1316,7 @@ impl Executor {
             // The motion stops before a segment it may not enter moving.
             // One the operator holds back (hold, a zero override) it may,
             // if it cannot stop sooner.
-            let next_cap = machine_cap_after(q, k);
-            if seg.exit_velocity == 0.0 || next_cap == 0.0 {
+            if rests_after(q, k) {
                 break;
             }
             start += seg.length;
@@ -1714,7 +1725,7 @@ impl Executor {
             if to_stop > ds {
                 return None;
             }
-            if seg.exit_velocity == 0.0 || machine_cap_after(q, k) == 0.0 {
+            if rests_after(q, k) {
                 break;
             }
             k += 1;
@@ -1723,9 +1734,8 @@ impl Executor {
         let jerk = a0 * a0 / (2.0 * v0);
         let landing = v0 * tau / 3.0;
         // Within rounding of where the stop is: a jump of d at rest reads
-        // up to 2·d/T³ in the jerk (without a jerk limit, the look ahead's
-        // own slack).
-        let slack = (JUMP_SHARE * jmax * dt * dt * dt).min(1e-9);
+        // up to 2·d/T³ in the jerk.
+        let slack = stop_slack(jmax, dt);
         (tau <= dt && jerk <= jmax * (1.0 + 1e-9) && (landing - to_stop).abs() <= slack)
             .then_some(to_stop.max(0.0))
     }
