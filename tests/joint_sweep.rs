@@ -237,6 +237,16 @@ enum Outcome {
 
 /// `text` on `machine` from its home, with a servo period of `period` s.
 fn run(machine: &kerf_machines::Machine, text: &str, period: f64) -> Outcome {
+    run_operated(machine, text, period, None)
+}
+
+/// [`run`] with `operator` (if any) at the controls.
+fn run_operated(
+    machine: &kerf_machines::Machine,
+    text: &str,
+    period: f64,
+    mut operator: Option<&mut Operator>,
+) -> Outcome {
     let home = machine.home();
     let config = RunConfig {
         planner: PlannerConfig {
@@ -245,26 +255,80 @@ fn run(machine: &kerf_machines::Machine, text: &str, period: f64) -> Outcome {
         },
         record: 0,
     };
-    match offline::run(
+    match offline::run_operated(
         Interpreter::from_text(text, "sweep.ngc", home),
         &*machine.kinematics,
         home,
         config,
+        |ex, time| {
+            if let Some(op) = operator.as_deref_mut() {
+                op.act(ex, time, period);
+            }
+        },
     ) {
         Ok(report) => Outcome::Ran(report),
         Err(e) => Outcome::Refused(e.to_string()),
     }
 }
 
-/// Runs `programs` random programs on each machine and checks every
-/// sampled joint and axis within its limits. Returns, per machine, how
-/// many ran and how many of those used a joint limit to at least 0.99
-/// (so the sweep tests joints that bind, not idle ones).
+/// A restless operator, from a seed: on average every 0.3 s a feed hold
+/// of 0.05–0.4 s, a feed override from 0 to 200 % (0 % one time in five)
+/// or a rapid override from 0 to 100 %; all released after 20 s so the
+/// program ends.
+struct Operator {
+    rng: fastrand::Rng,
+    hold_until: f64,
+    /// Periods the motion spent braking for a hold.
+    braking: usize,
+}
+
+impl Operator {
+    fn new(seed: u64) -> Operator {
+        Operator {
+            rng: fastrand::Rng::with_seed(seed),
+            hold_until: 0.0,
+            braking: 0,
+        }
+    }
+
+    /// Act before the servo period starting `time` s into the run.
+    fn act(&mut self, ex: &mut kerf_motion::Executor, time: f64, period: f64) {
+        if time >= 20.0 {
+            ex.set_hold(false);
+            ex.set_feed_override(1.0);
+            ex.set_rapid_override(1.0);
+            return;
+        }
+        if self.rng.f64() < period / 0.3 {
+            match self.rng.usize(..5) {
+                0 | 1 => self.hold_until = time + 0.05 + 0.35 * self.rng.f64(),
+                2 | 3 => ex.set_feed_override(if self.rng.usize(..5) == 0 {
+                    0.0
+                } else {
+                    2.0 * self.rng.f64()
+                }),
+                _ => ex.set_rapid_override(self.rng.f64()),
+            }
+        }
+        let hold = time < self.hold_until;
+        ex.set_hold(hold);
+        if hold && ex.velocity() > 0.0 {
+            self.braking += 1;
+        }
+    }
+}
+
+/// Runs `programs` random programs on each machine (under a restless
+/// operator if `operated`) and checks every sampled joint and axis within
+/// its limits. Returns, per machine, how many ran and how many of those
+/// used a joint limit to at least 0.99 (so the sweep tests joints that
+/// bind, not idle ones).
 fn sweep(
     cases: &[Case],
     programs: u64,
     slow: Option<f64>,
     period: f64,
+    operated: bool,
     verbose: bool,
 ) -> Vec<(&'static str, usize, usize)> {
     let mut out = Vec::new();
@@ -272,26 +336,29 @@ fn sweep(
         let slow = slow.unwrap_or(case.slow);
         let machine = machine(case, slow);
         let (mut ran, mut bound, mut refused) = (0, 0, 0);
-        let (mut motion, mut takeovers) = (0.0, 0);
+        let (mut motion, mut takeovers, mut braking) = (0.0, 0, 0);
         for seed in 0..programs {
             let text = program(case, 1000 * seed + 7);
-            let report = match run(&machine, &text, period) {
-                Outcome::Ran(report) => report,
-                Outcome::Refused(why) => {
-                    // Only refusals for the machine's reach are expected:
-                    // the box is not all reachable with every tilt.
-                    assert!(
-                        why.contains("move leaves the machine's limits"),
-                        "{} seed {seed}: refused for another reason: {why}\n{text}",
-                        case.name
-                    );
-                    refused += 1;
-                    continue;
-                }
-            };
+            let mut operator = Operator::new(seed);
+            let report =
+                match run_operated(&machine, &text, period, operated.then_some(&mut operator)) {
+                    Outcome::Ran(report) => report,
+                    Outcome::Refused(why) => {
+                        // Only refusals for the machine's reach are expected:
+                        // the box is not all reachable with every tilt.
+                        assert!(
+                            why.contains("move leaves the machine's limits"),
+                            "{} seed {seed}: refused for another reason: {why}\n{text}",
+                            case.name
+                        );
+                        refused += 1;
+                        continue;
+                    }
+                };
             ran += 1;
             motion += report.cycle_time;
             takeovers += report.guard_takeovers;
+            braking += operator.braking;
             let joint_use = report
                 .joints
                 .iter()
@@ -300,6 +367,7 @@ fn sweep(
             if joint_use >= 0.99 {
                 bound += 1;
             }
+            let operated = if operated { ", operated" } else { "" };
             for limit in report.axes.iter().chain(&report.joints) {
                 for (what, u) in [
                     ("velocity", limit.velocity),
@@ -308,7 +376,7 @@ fn sweep(
                 ] {
                     assert!(
                         u.ratio <= ALLOWED,
-                        "{} seed {seed}: {} {what} at {:.9} of its limit at t = {:.3} s, line {}\n{text}",
+                        "{} seed {seed}{operated}: {} {what} at {:.9} of its limit at t = {:.3} s, line {}\n{text}",
                         case.name,
                         limit.name,
                         u.ratio,
@@ -318,9 +386,24 @@ fn sweep(
                 }
             }
         }
+        if operated {
+            assert!(
+                braking > 0,
+                "{}: the operator never stopped a moving machine",
+                case.name
+            );
+        }
         if verbose {
+            let operator = if operated {
+                format!(
+                    ", {:.1} s braking for the operator's holds",
+                    braking as f64 * period
+                )
+            } else {
+                String::new()
+            };
             println!(
-                "{} (joints at {slow} of their limits, period {} µs): {ran} programs ran ({refused} refused for reach), {bound} with a joint at 0.99 of a limit or more, {motion:.1} s of motion, {takeovers} guard takeovers",
+                "{} (joints at {slow} of their limits, period {} µs): {ran} programs ran ({refused} refused for reach), {bound} with a joint at 0.99 of a limit or more, {motion:.1} s of motion, {takeovers} guard takeovers{operator}",
                 case.name,
                 period * 1e6
             );
@@ -332,14 +415,14 @@ fn sweep(
 
 #[test]
 fn joints_of_parallel_and_hybrid_machines_stay_within_their_limits() {
-    for (name, ran, _) in sweep(&CASES, 3, None, 0.001, false) {
+    for (name, ran, _) in sweep(&CASES, 3, None, 0.001, false, false) {
         assert!(ran >= 2, "{name}: only {ran} of 3 programs ran");
     }
 }
 
 #[test]
 fn mill3_at_the_finest_servo_period_stays_within_its_limits() {
-    let [(_, ran, _)] = sweep(&[MILL3], 2, None, 0.00025, false)[..] else {
+    let [(_, ran, _)] = sweep(&[MILL3], 2, None, 0.00025, false, false)[..] else {
         unreachable!("one machine")
     };
     assert_eq!(ran, 2, "mill3 reaches its whole box");
@@ -356,14 +439,14 @@ fn joint_sweep() {
         (60, Some(0.5), 0.001),
         (20, None, 0.00025),
     ] {
-        let mut runs: Vec<_> = sweep(&CASES, programs, slow, period, true)
+        let mut runs: Vec<_> = sweep(&CASES, programs, slow, period, false, true)
             .into_iter()
             .map(|run| (programs, run))
             .collect();
         if period < 0.001 {
             let more = 10 * programs;
             runs.extend(
-                sweep(&[MILL3], more, slow, period, true)
+                sweep(&[MILL3], more, slow, period, false, true)
                     .into_iter()
                     .map(|run| (more, run)),
             );
@@ -493,177 +576,9 @@ fn a_feed_stopping_before_a_rapid_keeps_to_the_jerk_limit_at_250_us() {
     assert!(x > 0.99, "X's jerk limit binds: {x}");
 }
 
-/// A restless operator, from a seed: on average every 0.3 s a feed hold
-/// of 0.05–0.4 s, a feed override from 0 to 200 % (0 % one time in five)
-/// or a rapid override from 0 to 100 %; all released after 20 s so the
-/// program ends.
-struct Operator {
-    rng: fastrand::Rng,
-    hold_until: f64,
-    /// Periods the motion spent braking for a hold.
-    held_moving: usize,
-}
-
-impl Operator {
-    fn act(&mut self, ex: &mut kerf_motion::Executor, time: f64, period: f64) {
-        if time >= 20.0 {
-            ex.set_hold(false);
-            ex.set_feed_override(1.0);
-            ex.set_rapid_override(1.0);
-            return;
-        }
-        if self.rng.f64() < period / 0.3 {
-            match self.rng.usize(..5) {
-                0 | 1 => self.hold_until = time + 0.05 + 0.35 * self.rng.f64(),
-                2 | 3 => ex.set_feed_override(if self.rng.usize(..5) == 0 {
-                    0.0
-                } else {
-                    2.0 * self.rng.f64()
-                }),
-                _ => ex.set_rapid_override(self.rng.f64()),
-            }
-        }
-        let hold = time < self.hold_until;
-        ex.set_hold(hold);
-        if hold && ex.velocity() > 0.0 {
-            self.held_moving += 1;
-        }
-    }
-}
-
-/// `text` on `machine` at `period` s under the operator of `seed`: the
-/// largest use of any axis's or joint's velocity, acceleration or jerk
-/// limit, by finite differences of the commanded positions and joints,
-/// where it was, and the periods spent braking for a hold; None if the planner
-/// refuses the program for reach.
-fn operated(
-    machine: &kerf_machines::Machine,
-    text: &str,
-    period: f64,
-    seed: u64,
-) -> Option<(f64, String, usize)> {
-    let kins = &*machine.kinematics;
-    let home = machine.home();
-    let config = PlannerConfig {
-        period,
-        ..PlannerConfig::default()
-    };
-    let program = Interpreter::from_text(text, "operated.ngc", home);
-    let segments = offline::plan_program(program, kins, home, config, 1).ok()?;
-    let mut queue: std::collections::VecDeque<_> = segments.into_iter().collect();
-    let mut ex = kerf_motion::Executor::new(home);
-    let mut operator = Operator {
-        rng: fastrand::Rng::with_seed(seed),
-        hold_until: 0.0,
-        held_moving: 0,
-    };
-    let (axes, joints) = (kins.axes(), kins.joints());
-    // The last four values of each axis, then each joint.
-    let mut last = vec![[0.0; 4]; axes.len() + joints.len()];
-    let mut worst = (0.0f64, String::new());
-    for tick in 0..(3000.0 / period) as usize {
-        let time = tick as f64 * period;
-        operator.act(&mut ex, time, period);
-        let (a, b) = queue.as_slices();
-        let sample = ex.tick(period, a, b);
-        queue.drain(..sample.consumed);
-        let p = sample.position.to_array();
-        let mut q = [0.0; kerf_motion::MAX_JOINTS];
-        kins.inverse(&sample.position, &mut q[..joints.len()])
-            .expect("the planner checked reach");
-        let values = axes
-            .iter()
-            .map(|a| (p[a.axis.index()], a.limits, a.axis.to_string()))
-            .chain(
-                joints
-                    .iter()
-                    .zip(q)
-                    .map(|(j, x)| (x, j.limits, j.name.clone())),
-            );
-        for ((x, limits, name), h) in values.zip(&mut last) {
-            *h = [x, h[0], h[1], h[2]];
-            if tick < 3 {
-                continue;
-            }
-            let uses = [
-                ("velocity", (h[0] - h[1]) / period / limits.max_velocity),
-                (
-                    "acceleration",
-                    (h[0] - 2.0 * h[1] + h[2]) / period.powi(2) / limits.max_acceleration,
-                ),
-                (
-                    "jerk",
-                    (h[0] - 3.0 * h[1] + 3.0 * h[2] - h[3]) / period.powi(3) / limits.max_jerk,
-                ),
-            ];
-            for (what, u) in uses {
-                if u.abs() > worst.0 {
-                    worst = (
-                        u.abs(),
-                        format!("{name} {what} at {time:.4} s, line {}", sample.line),
-                    );
-                }
-            }
-        }
-        if sample.stopped_at == Some(1) {
-            return Some((worst.0, worst.1, operator.held_moving));
-        }
-    }
-    panic!("did not finish within 3000 s:\n{text}");
-}
-
-/// Runs `programs` random programs on each of `cases` at `period` under
-/// a restless operator and checks every axis and joint within its
-/// limits. Returns, per machine, how many ran and in how many a limit
-/// bound (0.99 or more).
-fn operated_sweep(
-    cases: &[Case],
-    programs: u64,
-    period: f64,
-    verbose: bool,
-) -> Vec<(&'static str, usize, usize)> {
-    let mut out = Vec::new();
-    for case in cases {
-        let machine = machine(case, case.slow);
-        let (mut ran, mut bound, mut held) = (0, 0, 0);
-        for seed in 0..programs {
-            let text = program(case, 1000 * seed + 7);
-            let Some((worst, at, held_moving)) = operated(&machine, &text, period, seed) else {
-                continue;
-            };
-            assert!(
-                worst <= ALLOWED,
-                "{} seed {seed}, operated: {worst:.9} times a limit, {at}\n{text}",
-                case.name
-            );
-            ran += 1;
-            held += held_moving;
-            if worst >= 0.99 {
-                bound += 1;
-            }
-        }
-        if verbose {
-            println!(
-                "{} (joints at {} of their limits, period {} µs) under an operator: {ran} programs ran, {bound} with a limit bound, {:.1} s braking for holds",
-                case.name,
-                case.slow,
-                period * 1e6,
-                held as f64 * period
-            );
-        }
-        assert!(
-            held > 0,
-            "{}: the operator never stopped a moving machine",
-            case.name
-        );
-        out.push((case.name, ran, bound));
-    }
-    out
-}
-
 #[test]
 fn holds_and_overrides_keep_every_joint_within_its_limits() {
-    for (name, ran, _) in operated_sweep(&CASES, 2, 0.001, false) {
+    for (name, ran, _) in sweep(&CASES, 2, None, 0.001, true, false) {
         assert!(ran >= 1, "{name}: no program ran");
     }
 }
@@ -677,11 +592,11 @@ fn holds_and_overrides_keep_every_joint_within_its_limits() {
 fn operated_joint_sweep() {
     let cases = [&CASES[..], &[MILL3]].concat();
     for period in [0.001, 0.00025] {
-        for (name, ran, bound) in operated_sweep(&cases, 60, period, true) {
+        for (name, ran, bound) in sweep(&cases, 60, None, period, true, true) {
             assert!(ran >= 40, "{name}: only {ran} of 60 programs ran");
             assert!(
                 bound >= ran / 4,
-                "{name}: a limit bound in only {bound} of {ran}"
+                "{name}: the joints bound in only {bound} of {ran}"
             );
         }
     }

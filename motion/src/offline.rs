@@ -316,6 +316,20 @@ pub fn run(
     start: Position,
     config: RunConfig,
 ) -> Result<Report, RunError> {
+    run_operated(program, kins, start, config, |_, _| {})
+}
+
+/// [`run`] with an operator: `operate` acts on the executor (feed hold,
+/// overrides, single block) before every servo period, given the time
+/// into the run, s. The operator must release what it holds for the run
+/// to end.
+pub fn run_operated(
+    program: impl IntoIterator<Item = Result<Canon, InterpError>>,
+    kins: &dyn Kinematics,
+    start: Position,
+    config: RunConfig,
+    mut operate: impl FnMut(&mut Executor, f64),
+) -> Result<Report, RunError> {
     let dt = config.planner.period;
     let mut planner = Planner::new(kins, start, config.planner);
     let mut queue: VecDeque<Segment> = VecDeque::new();
@@ -379,6 +393,7 @@ pub fn run(
         // Nobody is there to resume a program stop (M0, M1): it passes,
         // and the cycle time leaves out the operator's part.
         executor.release_stop();
+        operate(&mut executor, ticks as f64 * dt);
         let sample = executor.tick(dt, a, b);
         for s in queue.drain(..sample.consumed) {
             if s.is_motion() && s.line != finished[1] {
