@@ -140,6 +140,9 @@ pub struct Snapshot {
     pub moving: bool,
     /// Source line of the current (or last) segment.
     pub line: u32,
+    /// The programmed moves the commanded position lies along
+    /// ([`Sample::moves`](kerf_motion::Sample::moves)).
+    pub moves: kerf_motion::SourceMoves,
     /// Id of the last program whose every segment has run (0: none yet).
     pub program_done: u32,
     /// Id of the last program that was aborted and flushed (0: none yet).
@@ -201,6 +204,7 @@ impl Snapshot {
             guard_takeovers: 0,
             moving: false,
             line: 0,
+            moves: kerf_motion::SourceMoves::default(),
             program_done: 0,
             inputs_answered: 0,
             input_value: 0.0,
@@ -770,6 +774,7 @@ impl ServoTick {
         }
         snap.moving = sample.moving;
         snap.line = sample.line;
+        snap.moves = sample.moves;
         snap.velocity = sample.velocity;
         let mut q = [0.0; MAX_JOINTS];
         match self.kins.inverse(&sample.position, &mut q[..n]) {

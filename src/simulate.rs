@@ -304,7 +304,7 @@ pub fn simulate(
             f.max_following_error = f.max_following_error.max(e.abs());
             *sq += e * e;
         }
-        if let Some(d) = path.distance(&snap.position, snap.line) {
+        if let Some(d) = path.distance(&snap.position, snap.moves) {
             report.max_contour_error = report.max_contour_error.max(d);
         }
         if options.record {

@@ -20,7 +20,7 @@
 
 use kerf_interp::Position;
 
-use crate::plan::{Segment, SegmentKind};
+use crate::plan::{Segment, SegmentKind, SourceMoves};
 
 mod guard;
 use guard::Guard;
@@ -32,6 +32,9 @@ pub struct Sample {
     pub position: Position,
     /// Source line of the segment being executed (or last executed).
     pub line: u32,
+    /// The programmed moves `position` lies along: those of the motion
+    /// segment it is on, or was last on ([`Segment::moves`]).
+    pub moves: SourceMoves,
     /// Path speed, mm/s.
     pub velocity: f64,
     /// Path acceleration, mm/s².
@@ -62,6 +65,7 @@ pub struct Executor {
     a: f64,
     position: Position,
     line: u32,
+    moves: SourceMoves,
     dwell_elapsed: f64,
     feed_override: f64,
     /// Second factor on feed moves, from the cutting-force controller.
@@ -692,6 +696,7 @@ impl Executor {
             a: 0.0,
             position: start,
             line: 0,
+            moves: SourceMoves::default(),
             dwell_elapsed: 0.0,
             feed_override: 1.0,
             feed_scale: 1.0,
@@ -1251,6 +1256,7 @@ impl Executor {
         }
         if let Some(seg) = q.get(consumed).filter(|s| s.is_motion()) {
             self.line = seg.line;
+            self.moves = seg.moves;
             self.position = seg.position_at(self.s);
         }
         self.at_stop = program_stop;
@@ -1261,6 +1267,7 @@ impl Executor {
         Sample {
             position: self.position,
             line: self.line,
+            moves: self.moves,
             velocity: self.v,
             acceleration: self.a,
             moving,
@@ -2121,6 +2128,7 @@ impl Executor {
         let seg = q.get(k).expect("k is a segment");
         self.position = seg.end();
         self.line = seg.line;
+        self.moves = seg.moves;
         self.s = 0.0;
     }
 }

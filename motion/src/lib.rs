@@ -37,5 +37,5 @@ pub use exec::{Executor, Sample};
 pub use kinematics::{AxisSpec, JointSpec, Kinematics, KinematicsError, Limits, MAX_JOINTS};
 pub use plan::{
     InputRequest, OutputChange, PathMode, PlanError, Planner, PlannerConfig, Segment, SegmentKind,
-    SyncOutputs, MAX_ANALOG_OUTPUTS, MAX_DIGITAL_OUTPUTS,
+    SourceMoves, SyncOutputs, MAX_ANALOG_OUTPUTS, MAX_DIGITAL_OUTPUTS,
 };

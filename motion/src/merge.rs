@@ -42,6 +42,7 @@ use std::collections::VecDeque;
 use kerf_interp::{Canon, CanonCmd, Plane, Position, Source};
 
 use crate::path::{distance_to_segment, Arc, Shape, Vec9};
+use crate::plan::SourceMoves;
 
 /// Most points a chain holds before a new move can no longer join it
 /// (LinuxCNC's limit): one merged line stands for at most this many + 1
@@ -59,6 +60,10 @@ pub struct MergeContext {
     /// The current feed rate is positive (a feed move at zero feed goes to
     /// the planner, which reports it).
     pub feed_ok: bool,
+    /// The number the planner gave the command offered
+    /// ([`SourceMoves`]): merged lines carry the numbers of the first and
+    /// last moves they stand for.
+    pub number: u64,
 }
 
 /// What the planner should do with the command it offered.
@@ -84,8 +89,10 @@ pub struct CollinearMerge {
     points: Vec<Vec9>,
     /// Source of the last held move.
     source: Option<Source>,
-    /// Merged lines waiting to be planned.
-    out: VecDeque<Canon>,
+    /// Numbers of the first and last held moves.
+    moves: SourceMoves,
+    /// Merged lines waiting to be planned, with the moves they stand for.
+    out: VecDeque<(Canon, SourceMoves)>,
 }
 
 impl CollinearMerge {
@@ -181,9 +188,11 @@ impl CollinearMerge {
         }
         if self.points.is_empty() {
             self.start = self.chain_start(ctx);
+            self.moves.first = ctx.number;
         }
         self.points.push(end);
         self.source = Some(source.clone());
+        self.moves.last = ctx.number;
         Verdict::Held
     }
 
@@ -194,10 +203,13 @@ impl CollinearMerge {
             return self.start;
         }
         match self.out.back() {
-            Some(Canon {
-                cmd: CanonCmd::StraightFeed { end },
-                ..
-            }) => end.to_array(),
+            Some((
+                Canon {
+                    cmd: CanonCmd::StraightFeed { end },
+                    ..
+                },
+                _,
+            )) => end.to_array(),
             _ => ctx.at.to_array(),
         }
     }
@@ -231,17 +243,21 @@ impl CollinearMerge {
             return;
         };
         let source = self.source.take().expect("a held move has a source");
-        self.out.push_back(Canon {
-            source,
-            cmd: CanonCmd::StraightFeed {
-                end: Position::from_array(last),
+        self.out.push_back((
+            Canon {
+                source,
+                cmd: CanonCmd::StraightFeed {
+                    end: Position::from_array(last),
+                },
             },
-        });
+            self.moves,
+        ));
         self.points.clear();
     }
 
-    /// The next merged line to plan, if any.
-    pub fn take(&mut self) -> Option<Canon> {
+    /// The next merged line to plan, if any, with the numbers of the moves
+    /// it stands for.
+    pub fn take(&mut self) -> Option<(Canon, SourceMoves)> {
         self.out.pop_front()
     }
 }
@@ -254,34 +270,48 @@ mod tests {
     /// Run `text` through the merge alone: the straight feeds it hands on
     /// (held or passed), as (end X, end Y, source line).
     fn lines(text: &str) -> Vec<(f64, f64, u32)> {
+        handed_on(text)
+            .into_iter()
+            .map(|(x, y, line, _)| (x, y, line))
+            .collect()
+    }
+
+    /// [`lines`], with the numbers of the moves each stands for (canon
+    /// commands numbered from 1, as the planner numbers them).
+    fn handed_on(text: &str) -> Vec<(f64, f64, u32, SourceMoves)> {
         let mut merge = CollinearMerge::new();
         let mut at = Position::ZERO;
         let mut out = Vec::new();
-        let note = |c: &Canon, at: &mut Position, out: &mut Vec<(f64, f64, u32)>| {
+        let note = |c: &Canon, moves, at: &mut Position, out: &mut Vec<_>| {
             if let CanonCmd::StraightFeed { end } | CanonCmd::ArcFeed { end, .. } = c.cmd {
-                out.push((end.x, end.y, c.source.line));
+                out.push((end.x, end.y, c.source.line, moves));
                 *at = end;
             }
         };
         let text = format!("{text}M2\n");
-        for c in Interpreter::from_text(&text, "t.ngc", Position::ZERO) {
+        for (number, c) in (1..).zip(Interpreter::from_text(&text, "t.ngc", Position::ZERO)) {
             let c = c.unwrap();
             let ctx = MergeContext {
                 at,
                 continuous: true,
                 feed_ok: true,
+                number,
             };
             let verdict = merge.see(&c, &ctx);
-            while let Some(m) = merge.take() {
-                note(&m, &mut at, &mut out);
+            while let Some((m, moves)) = merge.take() {
+                note(&m, moves, &mut at, &mut out);
             }
             if verdict == Verdict::Pass {
-                note(&c, &mut at, &mut out);
+                let moves = SourceMoves {
+                    first: number,
+                    last: number,
+                };
+                note(&c, moves, &mut at, &mut out);
             }
         }
         merge.flush();
-        while let Some(m) = merge.take() {
-            note(&m, &mut at, &mut out);
+        while let Some((m, moves)) = merge.take() {
+            note(&m, moves, &mut at, &mut out);
         }
         out
     }
@@ -297,6 +327,90 @@ mod tests {
         assert_eq!(got.len(), 10, "{got:?}");
         assert!((got[0].0 - 1.01).abs() < 1e-9 && got[0].2 == 102);
         assert!((got[9].0 - 10.0).abs() < 1e-9 && got[9].2 == 1001);
+    }
+
+    #[test]
+    fn a_merged_line_carries_the_numbers_of_the_first_and_last_moves_it_stands_for() {
+        // Three collinear moves in a loop (one source line, three moves),
+        // then a turn; the numbers are the moves' places in the canon
+        // stream, counted here from the interpreter's own output.
+        let text = "G21 G90 G64 P0.01 Q0.01 F600\n#1=1\nO1 while [#1 LE 3]\nG1 X#1\n#1=[#1+1]\nO1 endwhile\nG1 Y1\n";
+        let feeds: Vec<u64> = (1..)
+            .zip(Interpreter::from_text(
+                format!("{text}M2\n"),
+                "t.ngc",
+                Position::ZERO,
+            ))
+            .filter(|(_, c)| matches!(c.as_ref().unwrap().cmd, CanonCmd::StraightFeed { .. }))
+            .map(|(n, _)| n)
+            .collect();
+        assert_eq!(feeds.len(), 4, "three moves in the loop and one after");
+        let got = handed_on(text);
+        let span = |first, last| SourceMoves { first, last };
+        assert_eq!(
+            got,
+            vec![
+                (3.0, 0.0, 4, span(feeds[0], feeds[2])),
+                (3.0, 1.0, 7, span(feeds[3], feeds[3])),
+            ]
+        );
+    }
+
+    #[test]
+    fn merged_lines_stand_for_every_move_once_and_in_order() {
+        // Flat arcs (joining as midpoint and end) among short lines that
+        // wander within and beyond Q: whatever the chains, the numbers
+        // handed on cover every move, in order, and only an arc split
+        // between two chains appears in both.
+        let mut text = "G21 G90 G64 P0.01 Q0.01 F600\n".to_string();
+        let mut rng = crate::testkit::uniform(7);
+        let (mut x, mut y) = (0.0, 0.0);
+        for _ in 0..400 {
+            x += 0.3;
+            let dy = rng() * 0.02 - 0.01;
+            if rng() < 0.25 {
+                text += &format!("G3 X{x:.4} Y{:.4} R50\n", y + dy);
+            } else {
+                text += &format!("G1 X{x:.4} Y{:.4}\n", y + dy);
+            }
+            y += dy;
+        }
+        let moves: Vec<(u64, bool)> = (1..)
+            .zip(Interpreter::from_text(
+                format!("{text}M2\n"),
+                "t.ngc",
+                Position::ZERO,
+            ))
+            .filter_map(|(n, c)| match c.unwrap().cmd {
+                CanonCmd::StraightFeed { .. } => Some((n, false)),
+                CanonCmd::ArcFeed { .. } => Some((n, true)),
+                _ => None,
+            })
+            .collect();
+        let got = handed_on(&text);
+        assert!(
+            got.len() < moves.len() / 2,
+            "most moves merge: {}",
+            got.len()
+        );
+        let mut next = 0;
+        for (k, m) in got.iter().enumerate() {
+            let SourceMoves { first, last } = m.3;
+            assert!(first <= last);
+            // Starts at the next move, or on the arc the last one ended on.
+            let shared = k > 0 && got[k - 1].3.last == first;
+            assert!(
+                moves[next].0 == first || (shared && moves[next - 1] == (first, true)),
+                "line {k} ({first}..{last}) starts at move {:?}",
+                moves[next]
+            );
+            while next < moves.len() && moves[next].0 <= last {
+                next += 1;
+            }
+        }
+        assert_eq!(next, moves.len(), "every move handed on");
+        let shared = got.windows(2).filter(|w| w[0].3.last == w[1].3.first);
+        assert!(shared.count() > 0, "the program splits some arc");
     }
 
     #[test]

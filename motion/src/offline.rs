@@ -13,7 +13,7 @@ use kerf_interp::{Canon, CanonCmd, InterpError, Position};
 use crate::exec::Executor;
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::path::{distance_to_segment, Arc, Shape, Vec9};
-use crate::plan::{PlanError, Planner, PlannerConfig, Segment};
+use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SourceMoves};
 
 /// Why an offline run stopped early.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -131,57 +131,55 @@ pub struct RunConfig {
     pub record: usize,
 }
 
-/// A programmed move, kept while the executor may still be near it.
+/// A programmed move (or a chord of a programmed arc), kept while the
+/// machine may still be near it.
 #[derive(Clone, Copy, Debug)]
 struct Programmed {
-    line: u32,
+    /// The canon command's number ([`SourceMoves`]).
+    number: u64,
     start: Vec9,
     end: Vec9,
 }
 
-/// The programmed moves (as straight lines between their end points) near
-/// where the machine is, to measure how far a point is from the path.
+/// The programmed moves (arcs as fine chords) near where the machine is,
+/// to measure how far a point is from the path.
 ///
-/// Moves are added as the program is read, ahead of the machine; moves
-/// more than `keep_back` mm of path behind the executing line are dropped
-/// (at least one move before it is always kept: blends sit between two
-/// moves), and only moves on lines up to [`PathWindow::keep_after`].
+/// Every canon command given to the planner must be given to
+/// [`push`](Self::push) too, in the same order: both number them the same
+/// way, and a point is measured against the moves its segment spans
+/// ([`SourceMoves`], from [`Sample::moves`](crate::Sample::moves)), not
+/// against whatever moves happen to be near. Moves before those are
+/// dropped, but `keep_back` mm of path before them is kept, for points
+/// that lag behind the commanded one (the machine's actual position).
 #[derive(Clone, Debug)]
 pub struct PathWindow {
     moves: VecDeque<Programmed>,
     last_end: Vec9,
     keep_back: f64,
-    /// Moves on this line or before may be dropped.
-    floor: u32,
+    /// Canon commands pushed so far.
+    received: u64,
 }
 
 impl PathWindow {
     /// An empty path starting at `start`, keeping `keep_back` mm of moves
-    /// behind the executing line.
+    /// behind the executing segment's.
     pub fn new(start: Position, keep_back: f64) -> PathWindow {
         PathWindow {
             moves: VecDeque::new(),
             last_end: start.to_array(),
             keep_back,
-            floor: u32::MAX,
+            received: 0,
         }
     }
 
-    /// Keep every move on a line after `line`, however far behind. A line
-    /// merged under G64 Q carries the last of the source lines it stands
-    /// for, so while it runs the tool can be far from the executing line's
-    /// own move: the caller names the line of the segment before the one
-    /// the tool last finished, whose moves it has surely left.
-    pub fn keep_after(&mut self, line: u32) {
-        self.floor = line;
-    }
-
-    /// Record the move of `canon`, if it is one; returns the XYZ points it
-    /// adds to the path (for plots). Arcs are kept as chords whose sag is
-    /// under 0.1 µm, so distances to them are distances to the arc to that
-    /// precision; a move that goes nowhere (an F word alone on a G1 line) is
-    /// no geometry.
+    /// Record `canon` (numbering it as the planner does) and its move, if
+    /// it is one; returns the XYZ points it adds to the path (for plots).
+    /// Arcs are kept as chords whose sag is under 0.1 µm, so distances to
+    /// them are distances to the arc to that precision; a move that goes
+    /// nowhere (an F word alone on a G1 line) is no geometry.
     pub fn push(&mut self, canon: &Canon) -> Vec<[f64; 3]> {
+        self.received += 1;
+        let number = self.received;
         let mut added = Vec::new();
         match &canon.cmd {
             CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
@@ -189,7 +187,7 @@ impl PathWindow {
             {
                 let end = end.to_array();
                 self.moves.push_back(Programmed {
-                    line: canon.source.line,
+                    number,
                     start: self.last_end,
                     end,
                 });
@@ -219,7 +217,7 @@ impl PathWindow {
                 for k in 1..=n {
                     let to = shape.point(len * k as f64 / n as f64);
                     self.moves.push_back(Programmed {
-                        line: canon.source.line,
+                        number,
                         start: from,
                         end: to,
                     });
@@ -233,31 +231,31 @@ impl PathWindow {
         added
     }
 
-    /// XYZ distance of `p` from the nearest kept move up to line `line` + 1,
-    /// with `line` executing now; `None` before any move.
-    pub fn distance(&mut self, p: &Position, line: u32) -> Option<f64> {
+    /// XYZ distance of `p` from the nearest of the programmed moves
+    /// `moves` (and of those kept behind them); `None` if none of them is
+    /// geometry (before any move).
+    pub fn distance(&mut self, p: &Position, moves: SourceMoves) -> Option<f64> {
         let length = |m: &Programmed| {
             (0..3)
                 .map(|i| (m.end[i] - m.start[i]).powi(2))
                 .sum::<f64>()
                 .sqrt()
         };
-        loop {
-            let before = self.moves.iter().take_while(|m| m.line < line).count();
-            if before < 2 {
-                break;
-            }
-            let behind: f64 = self.moves.iter().take(before).skip(1).map(length).sum();
-            if behind < self.keep_back || self.moves[0].line > self.floor {
-                break;
-            }
-            self.moves.pop_front();
+        // Drop what lies wholly more than keep_back behind the first move
+        // spanned: segments run in order, and their spans never go back.
+        let before = self.moves.partition_point(|m| m.number < moves.first);
+        let mut behind = 0.0;
+        let mut keep = 0;
+        while keep < before && behind < self.keep_back {
+            behind += length(&self.moves[before - 1 - keep]);
+            keep += 1;
         }
+        self.moves.drain(..before - keep);
         let p = p.to_array();
         let near = self
             .moves
             .iter()
-            .take_while(|m| m.line <= line + 1)
+            .take_while(|m| m.number <= moves.last)
             .map(|m| distance_to_segment(&p, &m.start, &m.end))
             .fold(f64::INFINITY, f64::min);
         near.is_finite().then_some(near)
@@ -336,8 +334,6 @@ pub fn run_operated(
     let mut executor = Executor::new(start);
     let mut report = Report::default();
     let mut programmed = PathWindow::new(start, 0.0);
-    // Source lines of the last two motion segments finished (distinct).
-    let mut finished = [0u32; 2];
     let njoints = kins.joints().len();
 
     let axis_specs = kins.axes().to_vec();
@@ -395,19 +391,14 @@ pub fn run_operated(
         executor.release_stop();
         operate(&mut executor, ticks as f64 * dt);
         let sample = executor.tick(dt, a, b);
-        for s in queue.drain(..sample.consumed) {
-            if s.is_motion() && s.line != finished[1] {
-                finished = [finished[1], s.line];
-            }
-        }
+        queue.drain(..sample.consumed);
         ticks += 1;
         let time = ticks as f64 * dt;
         let p = sample.position.to_array();
-        // Deviation: distance to the nearest programmed move around the
-        // executing line (blends sit between two moves, and lines merged
-        // under G64 Q stand for many).
-        programmed.keep_after(finished[0]);
-        if let Some(near) = programmed.distance(&sample.position, sample.line) {
+        // Deviation: distance to the nearest of the programmed moves the
+        // executing segment runs along (a blend sits between two, a line
+        // merged under G64 Q stands for many).
+        if let Some(near) = programmed.distance(&sample.position, sample.moves) {
             if near > report.max_deviation {
                 report.max_deviation = near;
                 report.max_deviation_at = (time, sample.line);

@@ -109,6 +109,31 @@ impl SyncOutputs {
     }
 }
 
+/// The programmed moves a segment runs along, by number.
+///
+/// The planner numbers the canon commands it is given from 1, in order
+/// ([`Planner::plan`]). A line or arc spans its own command; a line merged
+/// under G64 Q spans the moves it stands for; a blend spans the move it
+/// leaves to the move it enters. What measures a path against the program
+/// (`offline`, `kerf sim`'s contour error) compares a point with the moves
+/// its segment spans: source lines cannot say which those are, since loops
+/// and subroutines run one line many times, and a merged line or a blend
+/// reaches back past the line it is labelled with.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SourceMoves {
+    /// Number of the first canon command spanned.
+    pub first: u64,
+    /// Number of the last.
+    pub last: u64,
+}
+
+impl SourceMoves {
+    /// The one command numbered `n`.
+    pub fn one(n: u64) -> SourceMoves {
+        SourceMoves { first: n, last: n }
+    }
+}
+
 /// A planned piece of motion. `Copy` and allocation-free, so the servo
 /// thread can take and drop it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -116,6 +141,8 @@ pub struct Segment {
     pub kind: SegmentKind,
     /// Source line of the canon command that made this segment.
     pub line: u32,
+    /// The programmed moves it runs along (none for markers).
+    pub moves: SourceMoves,
     pub shape: Shape,
     /// Path length, mm (degrees for pure rotary moves).
     pub length: f64,
@@ -145,6 +172,7 @@ impl Segment {
         Segment {
             kind,
             line,
+            moves: SourceMoves::default(),
             shape: Shape::Line(Line { start: p, end: p }),
             length: 0.0,
             feed: 0.0,
@@ -595,6 +623,11 @@ pub struct Planner<'k> {
     position: Position,
     /// Source line of the last command given to [`Planner::plan`].
     last_line: u32,
+    /// Canon commands given to [`plan`](Self::plan) so far: the number of
+    /// the last ([`SourceMoves`]).
+    received: u64,
+    /// The programmed moves of the command being planned.
+    moves: SourceMoves,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
     /// G64 Q: straight feeds held for merging (merge.rs).
@@ -1347,6 +1380,8 @@ impl<'k> Planner<'k> {
             sync_outputs: SyncOutputs::default(),
             position: start,
             last_line: 0,
+            received: 0,
+            moves: SourceMoves::default(),
             pending: VecDeque::new(),
             ready: VecDeque::new(),
             merge: CollinearMerge::new(),
@@ -1407,8 +1442,8 @@ impl<'k> Planner<'k> {
     /// fail; the result is not needed.
     fn release_merged(&mut self) {
         self.merge.flush();
-        while let Some(merged) = self.merge.take() {
-            let planned = self.command(&merged);
+        while let Some((merged, moves)) = self.merge.take() {
+            let planned = self.command(&merged, moves);
             debug_assert!(planned.is_ok(), "a checked merged line failed: {planned:?}");
         }
     }
@@ -1422,6 +1457,7 @@ impl<'k> Planner<'k> {
     /// check can report every violation of a program.
     pub fn plan(&mut self, canon: &Canon) -> Result<(), PlanError> {
         self.last_line = canon.source.line;
+        self.received += 1;
         // G64 Q (merge.rs): runs of nearly collinear straight feeds are held
         // and planned as one line. A move that leaves the machine is not
         // held, so its error names its own line.
@@ -1439,15 +1475,16 @@ impl<'k> Planner<'k> {
                 at: self.position,
                 continuous: matches!(self.mode, PathMode::Blend { .. }),
                 feed_ok: self.feed() > 0.0,
+                number: self.received,
             };
             self.merge.see(canon, &ctx)
         };
         let mut result = Ok(());
-        while let Some(merged) = self.merge.take() {
-            result = result.and(self.command(&merged));
+        while let Some((merged, moves)) = self.merge.take() {
+            result = result.and(self.command(&merged, moves));
         }
         if verdict == Verdict::Pass {
-            result = result.and(self.command(canon));
+            result = result.and(self.command(canon, SourceMoves::one(self.received)));
         }
         result
     }
@@ -1481,7 +1518,9 @@ impl<'k> Planner<'k> {
         self.check_shape(canon, &Shape::Line(line)).is_ok()
     }
 
-    fn command(&mut self, canon: &Canon) -> Result<(), PlanError> {
+    /// Plan `canon`, which runs along the programmed moves `moves`.
+    fn command(&mut self, canon: &Canon, moves: SourceMoves) -> Result<(), PlanError> {
+        self.moves = moves;
         let line = canon.source.line;
         let unsupported = |what: &str| {
             Err(self.error(canon, format!("{what} is not supported by the planner yet")))
@@ -2060,6 +2099,7 @@ impl<'k> Planner<'k> {
         a.segment.length = a.segment.shape.length();
         let a_kind = a.segment.kind;
         let a_feed = a.segment.feed;
+        let a_first = a.segment.moves.first;
         // Equal tangents and curvatures meet at both ends of the blend;
         // a consumed move leaves nothing (or rounding) between blends.
         if a.segment.length > 1e-9 * full.max(1.0) {
@@ -2079,6 +2119,10 @@ impl<'k> Planner<'k> {
         // X Y Z only: blends join lines that move nothing else.
         b.mid = chosen.end;
         let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
+        let moves = SourceMoves {
+            first: a_first,
+            last: b.segment.moves.last,
+        };
         let b_force = b.segment.force_control;
         // Move b's motion now starts with the blend.
         let b_outputs = std::mem::take(&mut b.segment.outputs);
@@ -2095,6 +2139,7 @@ impl<'k> Planner<'k> {
             ..self.segment_unlimited(kind, b_line_number, Shape::Blend(chosen.blend.0))
         };
         blend.feed = a_feed.min(b_feed);
+        blend.moves = moves;
         // The blend starts move b, so it carries b's force setting, not
         // whatever the program has set since.
         blend.force_control = b_force;
@@ -2404,6 +2449,7 @@ impl<'k> Planner<'k> {
         Segment {
             kind,
             line,
+            moves: self.moves,
             shape,
             length: shape.length(),
             feed,
@@ -2448,6 +2494,7 @@ impl<'k> Planner<'k> {
         Segment {
             kind,
             line,
+            moves: self.moves,
             shape,
             length,
             feed,
