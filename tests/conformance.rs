@@ -9,6 +9,9 @@
 //!
 //! Run it alone with `cargo test --test conformance -- --nocapture`.
 
+#[path = "support/shared.rs"]
+mod shared;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -21,11 +24,7 @@ use serde_json::Value;
 const FLOOR: usize = 114;
 
 fn corpus_dir() -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    [root.join("../shared"), root.join("../../shared")]
-        .into_iter()
-        .map(|p| p.join("conformance/linuxcnc"))
-        .find(|p| p.join("cases.json").is_file())
+    shared::conformance_dir("linuxcnc", "cases.json")
 }
 
 fn copy_dir(from: &Path, to: &Path) {

@@ -15,6 +15,9 @@
 //!
 //! Run it alone with `cargo test --test differential -- --nocapture`.
 
+#[path = "support/shared.rs"]
+mod shared;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -26,11 +29,7 @@ use kerf_interp::{Config, Interpreter, Offline};
 const FLOOR: usize = 210;
 
 fn programs_dir() -> Option<PathBuf> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    [root.join("../shared"), root.join("../../shared")]
-        .into_iter()
-        .map(|p| p.join("conformance/linuxcnc-programs"))
-        .find(|p| p.join("programs.tsv").is_file())
+    shared::conformance_dir("linuxcnc-programs", "programs.tsv")
 }
 
 fn rs274_available() -> bool {
