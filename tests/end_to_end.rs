@@ -770,6 +770,43 @@ fn run_from_a_line_and_single_block_stepping() {
     assert_eq!((axis(&end, "x"), axis(&end, "y")), (0.0, 10.0));
 }
 
+/// Single block through a loop over one line: each pass is a step, as
+/// each block LinuxCNC executes is (told apart by line alone, the first
+/// step ran every pass).
+#[test]
+fn single_block_steps_each_pass_of_a_loop() {
+    let kerfd = Kerfd::start(&[]);
+    let mut c = kerfd.ready_client();
+    let program = kerfd.program(
+        "loop.ngc",
+        "G21 G90 F3000\n#1=1\nO1 while [#1 LE 3]\nG1 X[#1*10] Y5\n#1=[#1+1]\nO1 endwhile\nM2\n",
+    );
+    c.request(&Command::Open {
+        path: program.display().to_string(),
+    })
+    .unwrap();
+    subscribe(&mut c, 200.0);
+    let at_rest_on = |s: &Status, x: f64| {
+        (axis(s, "x") - x).abs() < 1e-9 && (axis(s, "y") - 5.0).abs() < 1e-9 && s.velocity == 0.0
+    };
+    for x in [10.0, 20.0] {
+        c.request(&Command::Step).unwrap();
+        let s = statuses_until(&mut c, |s| at_rest_on(s, x)).pop().unwrap();
+        assert_eq!(s.line, 4, "every pass is line 4");
+        for _ in 0..10 {
+            let s = next_status(&mut c);
+            assert_eq!(axis(&s, "x"), x, "waits for the next step");
+            assert_eq!(s.execution, Some(Execution::Stepping));
+        }
+    }
+    // The third pass, then the program ends (M2 moves nothing).
+    c.request(&Command::Step).unwrap();
+    let end = statuses_until(&mut c, |s| s.state == MachineState::Idle)
+        .pop()
+        .unwrap();
+    assert_eq!(axis(&end, "x"), 30.0);
+}
+
 /// mill3 with a following-error limit on joint x and a simulated jam of
 /// that joint at 20 mm.
 fn jamming_machine(kerfd_dir: &std::path::Path) -> std::path::PathBuf {

@@ -322,6 +322,11 @@ pub struct Source {
     pub line: u32,
     /// The line's N word, if it has one.
     pub block: Option<BlockNumber>,
+    /// Which reading of a line this is: the lines the interpreter had read
+    /// when it gave the command (0 at start-up). A loop or a subroutine
+    /// called again reads one line many times; each pass has its own
+    /// reading, so single block can stop after each.
+    pub reading: u64,
 }
 
 impl Source {
@@ -331,6 +336,7 @@ impl Source {
             file: file.into(),
             line,
             block: None,
+            reading: 0,
         }
     }
 }

@@ -567,6 +567,7 @@ impl<'a> Interp<'a> {
             file: self.files[self.cur_file].name.clone(),
             line: self.sequence_number,
             block: self.line_n,
+            reading: self.lines_read,
         }
     }
 

@@ -73,8 +73,9 @@ pub struct Executor {
     rapid_override: f64,
     hold: bool,
     single_block: bool,
-    /// In single-block mode: the source line allowed to run.
-    block_line: Option<u32>,
+    /// In single-block mode: the reading of a source line allowed to run
+    /// ([`Segment::reading`]).
+    block: Option<u64>,
     step_requested: bool,
     /// The stop being played back, if any.
     brake: Option<Brake>,
@@ -703,7 +704,7 @@ impl Executor {
             rapid_override: 1.0,
             hold: false,
             single_block: false,
-            block_line: None,
+            block: None,
             step_requested: false,
             brake: None,
             input_released: false,
@@ -807,14 +808,15 @@ impl Executor {
         self.hold
     }
 
-    /// Single-block mode: stop at the end of every source line and wait for
-    /// [`step`](Self::step).
+    /// Single-block mode: stop at the end of every source line (of every
+    /// reading of it: each pass of a loop) and wait for [`step`](Self::step).
     pub fn set_single_block(&mut self, on: bool) {
         self.single_block = on;
-        self.block_line = None;
+        self.block = None;
     }
 
-    /// In single-block mode, run the next source line.
+    /// In single-block mode, run the next source line (the next reading
+    /// of one: a loop's next pass).
     pub fn step(&mut self) {
         self.step_requested = true;
     }
@@ -826,7 +828,7 @@ impl Executor {
         self.v = 0.0;
         self.a = 0.0;
         self.dwell_elapsed = 0.0;
-        self.block_line = None;
+        self.block = None;
         self.brake = None;
         self.guard = None;
         self.at_stop = false;
@@ -1189,9 +1191,9 @@ impl Executor {
             if self.single_block
                 && self.v == 0.0
                 && self.step_requested
-                && self.block_line != Some(seg.line)
+                && self.block != Some(seg.reading)
             {
-                self.block_line = Some(seg.line);
+                self.block = Some(seg.reading);
                 self.step_requested = false;
             }
             match seg.kind {
@@ -1281,7 +1283,7 @@ impl Executor {
     /// Whether feed hold, or single block before a `step` for its line,
     /// keeps the motion out of `seg` (overrides aside).
     fn operator_blocks(&self, seg: &Segment) -> bool {
-        self.hold || (self.single_block && self.block_line != Some(seg.line))
+        self.hold || (self.single_block && self.block != Some(seg.reading))
     }
 
     /// Whether the operator's settings alone keep the motion from entering
@@ -1343,7 +1345,7 @@ impl Executor {
         // toward rest under every limit (hold caps the speed at zero).
         // Single block switched on while moving stops the same way, until
         // the first step.
-        let halting = self.hold || (self.single_block && self.block_line.is_none());
+        let halting = self.hold || (self.single_block && self.block.is_none());
         if halting && shaped {
             if !self.brake.is_some_and(|b| b.hold) {
                 if self.v == 0.0 && self.a == 0.0 {
@@ -3052,6 +3054,34 @@ mod simulation {
         assert_eq!(out.last().unwrap().position.x, 30.0);
         assert_eq!(steps, 3, "one step per line");
         assert!(out.len() > 2000);
+    }
+
+    /// A loop runs one source line three times: single block stops after
+    /// each pass, as after each line (LinuxCNC steps per block executed).
+    /// Told apart by line alone, the three passes ran as one step.
+    #[test]
+    fn single_block_runs_one_pass_of_a_loop_per_step() {
+        let text = "#1=1\nO1 while [#1 LE 3]\nG1 X[#1*10] F3000\n#1=[#1+1]\nO1 endwhile\nM2\n";
+        let mut q = planned(text, PathMode::ExactPath);
+        let mut steps = 0;
+        let out = run(&mut q, |n, ex| {
+            if n == 0 {
+                ex.set_single_block(true);
+            }
+            if n % 1000 == 0 {
+                ex.step();
+                steps += 1;
+            }
+        });
+        let at = |n: usize| out[n].position.x;
+        assert_eq!((at(998), at(999)), (10.0, 10.0), "the first pass");
+        assert_eq!((at(1998), at(1999)), (20.0, 20.0), "the second pass");
+        assert_eq!(out.last().unwrap().position.x, 30.0);
+        assert_eq!(steps, 3, "one step per pass");
+        assert!(
+            out.iter().filter(|s| s.moving).all(|s| s.line == 3),
+            "every move on line 3"
+        );
     }
 
     /// What a virtual clock may stop for: the sample says the motion waits

@@ -143,6 +143,11 @@ pub struct Segment {
     pub line: u32,
     /// The programmed moves it runs along (none for markers).
     pub moves: SourceMoves,
+    /// Which reading of its source line made it
+    /// ([`Source::reading`](kerf_interp::Source::reading)): single block
+    /// runs one reading per step, so each pass of a loop over one line is
+    /// a step of its own.
+    pub reading: u64,
     pub shape: Shape,
     /// Path length, mm (degrees for pure rotary moves).
     pub length: f64,
@@ -173,6 +178,7 @@ impl Segment {
             kind,
             line,
             moves: SourceMoves::default(),
+            reading: 0,
             shape: Shape::Line(Line { start: p, end: p }),
             length: 0.0,
             feed: 0.0,
@@ -628,6 +634,8 @@ pub struct Planner<'k> {
     received: u64,
     /// The programmed moves of the command being planned.
     moves: SourceMoves,
+    /// Its source's reading ([`Segment::reading`]).
+    reading: u64,
     pending: VecDeque<Pending>,
     ready: VecDeque<Segment>,
     /// G64 Q: straight feeds held for merging (merge.rs).
@@ -1382,6 +1390,7 @@ impl<'k> Planner<'k> {
             last_line: 0,
             received: 0,
             moves: SourceMoves::default(),
+            reading: 0,
             pending: VecDeque::new(),
             ready: VecDeque::new(),
             merge: CollinearMerge::new(),
@@ -1403,7 +1412,10 @@ impl<'k> Planner<'k> {
     /// status, the deviation measured against the program) sees the
     /// program's end, not line 0.
     pub fn end_marker(&self, tag: u32) -> Segment {
-        Segment::marker(SegmentKind::Stop { tag }, self.last_line, self.position)
+        Segment {
+            reading: self.reading,
+            ..Segment::marker(SegmentKind::Stop { tag }, self.last_line, self.position)
+        }
     }
 
     /// Set the path control mode for the following moves.
@@ -1521,6 +1533,7 @@ impl<'k> Planner<'k> {
     /// Plan `canon`, which runs along the programmed moves `moves`.
     fn command(&mut self, canon: &Canon, moves: SourceMoves) -> Result<(), PlanError> {
         self.moves = moves;
+        self.reading = canon.source.reading;
         let line = canon.source.line;
         let unsupported = |what: &str| {
             Err(self.error(canon, format!("{what} is not supported by the planner yet")))
@@ -1710,8 +1723,10 @@ impl<'k> Planner<'k> {
     /// an immediate output): everything before it runs to rest first.
     fn marker_at_rest(&mut self, line: u32, kind: SegmentKind) {
         self.finish();
-        self.ready
-            .push_back(Segment::marker(kind, line, self.position));
+        self.ready.push_back(Segment {
+            reading: self.reading,
+            ..Segment::marker(kind, line, self.position)
+        });
     }
 
     /// Hand the waiting M62/M63/M67 changes to the move about to be queued.
@@ -2119,6 +2134,7 @@ impl<'k> Planner<'k> {
         // X Y Z only: blends join lines that move nothing else.
         b.mid = chosen.end;
         let (b_kind, b_line_number, b_feed) = (b.segment.kind, b.segment.line, b.segment.feed);
+        let b_reading = b.segment.reading;
         let moves = SourceMoves {
             first: a_first,
             last: b.segment.moves.last,
@@ -2140,6 +2156,7 @@ impl<'k> Planner<'k> {
         };
         blend.feed = a_feed.min(b_feed);
         blend.moves = moves;
+        blend.reading = b_reading;
         // The blend starts move b, so it carries b's force setting, not
         // whatever the program has set since.
         blend.force_control = b_force;
@@ -2450,6 +2467,7 @@ impl<'k> Planner<'k> {
             kind,
             line,
             moves: self.moves,
+            reading: self.reading,
             shape,
             length: shape.length(),
             feed,
@@ -2495,6 +2513,7 @@ impl<'k> Planner<'k> {
             kind,
             line,
             moves: self.moves,
+            reading: self.reading,
             shape,
             length,
             feed,
