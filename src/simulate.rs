@@ -231,19 +231,16 @@ pub fn simulate(
     tick.configure(description);
     tick.set_feedforward(options.feedforward);
 
-    let mut planner = Planner::new(
-        &*kins,
-        home,
-        PlannerConfig {
-            period: options.period,
-            ..PlannerConfig::default()
-        },
-    );
+    let planner_config = PlannerConfig {
+        period: options.period,
+        ..PlannerConfig::default()
+    };
+    let mut planner = Planner::new(&*kins, home, planner_config);
     planner.set_force_control(options.force_target);
     let mut program = program.into_iter();
     let mut pending: VecDeque<Segment> = VecDeque::new();
     let mut program_read = false;
-    let mut path = PathWindow::new(home, CONTOUR_WINDOW);
+    let mut path = PathWindow::new(home, CONTOUR_WINDOW, &planner_config);
 
     let mut report = SimReport {
         joints: kins
@@ -305,7 +302,7 @@ pub fn simulate(
             *sq += e * e;
         }
         if let Some(d) = path.distance(&snap.position, snap.moves) {
-            report.max_contour_error = report.max_contour_error.max(d);
+            report.max_contour_error = report.max_contour_error.max(d.distance);
         }
         if options.record {
             report.trace.push(TracePoint {

@@ -41,6 +41,8 @@ fn exact_stops_in_a_loop_follow_every_pass_exactly() {
     // against moves found by source line, a later pass of the loop was
     // compared with an earlier one, across the circle.
     let report = run(&holes_in_a_loop("G61"));
+    assert_eq!(report.max_deviation_allowed, 0.0, "G61: none allowed");
+    assert!(report.over_tolerance < 1e-9, "{}", report.over_tolerance);
     assert!(
         report.max_deviation < 1e-9,
         "deviation {} mm at line {} (t = {} s)",
@@ -56,6 +58,10 @@ fn blended_passes_of_a_loop_stay_within_p() {
     // within P = 0.05 mm of the programmed lines; the blends do leave
     // them (by about P·sin 45° at these square corners).
     let report = run(&holes_in_a_loop("G64 P0.05"));
+    // Q defaults to P: the rapids are not merged (only feeds are), but
+    // the program allows P + Q.
+    assert_eq!(report.max_deviation_allowed, 0.1);
+    assert!(report.over_tolerance < 1e-9, "{}", report.over_tolerance);
     assert!(
         report.max_deviation <= 0.05 + 1e-9,
         "deviation {} mm at line {}",
@@ -79,6 +85,9 @@ fn a_wiggle_merged_away_on_a_second_call_is_measured_against_that_call() {
                 X120 Y100\nY130\nG0 Z0\nO100 endsub\n\
                 G61\nO100 call\nG64 P0.01 Q0.3\nO100 call\nM2\n";
     let report = run(text);
+    // Allowed there: P + Q of the second call, not the first call's G61.
+    assert!((report.max_deviation_allowed - 0.31).abs() < 1e-12);
+    assert!(report.over_tolerance < 1e-9, "{}", report.over_tolerance);
     let expected = 0.2 / (1.0f64 + 0.02 * 0.02).sqrt();
     assert!(
         report.max_deviation <= expected + 1e-9 && report.max_deviation > expected - 3e-4,

@@ -229,6 +229,7 @@ fn plan_all(root: &Path, list: &[String], period_us: u32) -> Vec<String> {
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         let limit = report["max_limit_ratio"].as_f64().unwrap();
         let deviation = report["max_deviation_mm"].as_f64().unwrap();
+        let over = report["over_tolerance_mm"].as_f64().unwrap();
         let allowed = allowed_deviation(&file, &tools);
         println!(
             "{rel}: {:.3} s, deviation {deviation:.4} mm (allowed {allowed:.4}), limit use {limit:.9}",
@@ -236,6 +237,9 @@ fn plan_all(root: &Path, list: &[String], period_us: u32) -> Vec<String> {
         );
         if limit > 1.0 + 1e-6 {
             failures.push(format!("{rel}: limit use {limit}"));
+        }
+        if over > 1e-9 {
+            failures.push(format!("{rel}: {over} mm over the tolerance where it ran"));
         }
         if deviation > allowed + 1e-9 {
             failures.push(format!(

@@ -8,12 +8,12 @@
 
 use std::collections::VecDeque;
 
-use kerf_interp::{Canon, CanonCmd, InterpError, Position};
+use kerf_interp::{Canon, CanonCmd, InterpError, MotionMode, Position};
 
 use crate::exec::Executor;
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
 use crate::path::{distance_to_segment, Arc, Shape, Vec9};
-use crate::plan::{PlanError, Planner, PlannerConfig, Segment, SourceMoves};
+use crate::plan::{PathMode, PlanError, Planner, PlannerConfig, Segment, SourceMoves};
 
 /// Why an offline run stopped early.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -100,6 +100,16 @@ pub struct Report {
     pub max_deviation: f64,
     /// Where it was: time (s) and source line.
     pub max_deviation_at: (f64, u32),
+    /// What the program allowed there, mm: its G64 P (the planner's default
+    /// tolerance for G64 without P, 0 under G61 and G61.1) plus its G64 Q,
+    /// the largest over the moves the segment spans.
+    pub max_deviation_allowed: f64,
+    /// The most the deviation went beyond what the program allowed where
+    /// it happened, by more than the measure's precision (0.1 µm on arcs,
+    /// kept as chords), mm (0: within it everywhere), and where: time (s)
+    /// and source line.
+    pub over_tolerance: f64,
+    pub over_tolerance_at: (f64, u32),
     pub axes: Vec<LimitUse>,
     pub joints: Vec<LimitUse>,
     /// Up to `record` evenly spaced points of the trajectory.
@@ -139,6 +149,34 @@ struct Programmed {
     number: u64,
     start: Vec9,
     end: Vec9,
+    /// The deviation the program allows along it: G64 P plus Q, mm.
+    allowed: f64,
+    /// How far the programmed path may lie from this line, mm: 0 for a
+    /// line, the sag for a chord of an arc.
+    sag: f64,
+}
+
+/// Sag of the chords an arc is kept as, mm.
+const CHORD_SAG: f64 = 1e-4;
+
+/// How far a point is from the programmed path ([`PathWindow::distance`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Deviation {
+    /// Distance from the nearest programmed move (arcs as chords), mm.
+    pub distance: f64,
+    /// What the program allows along the moves spanned: G64 P plus Q, mm.
+    pub allowed: f64,
+    /// How precise `distance` is, mm: the sag of the chord it was measured
+    /// to (0 on lines).
+    pub precision: f64,
+}
+
+impl Deviation {
+    /// How far beyond what the program allows the point surely is, mm
+    /// (negative: within it, as far as the measure can tell).
+    pub fn over(&self) -> f64 {
+        self.distance - self.precision - self.allowed
+    }
 }
 
 /// The programmed moves (arcs as fine chords) near where the machine is,
@@ -158,17 +196,30 @@ pub struct PathWindow {
     keep_back: f64,
     /// Canon commands pushed so far.
     received: u64,
+    /// G64 P in force, mm (0 under G61 and G61.1), as the planner reads it.
+    tolerance: f64,
+    /// The planner's tolerance for G64 without P, mm.
+    default_tolerance: f64,
+    /// G64 Q in force, mm.
+    merge: f64,
 }
 
 impl PathWindow {
     /// An empty path starting at `start`, keeping `keep_back` mm of moves
-    /// behind the executing segment's.
-    pub fn new(start: Position, keep_back: f64) -> PathWindow {
+    /// behind the executing segment's, for a planner set up with `planner`
+    /// (its starting path mode and default tolerance).
+    pub fn new(start: Position, keep_back: f64, planner: &PlannerConfig) -> PathWindow {
         PathWindow {
             moves: VecDeque::new(),
             last_end: start.to_array(),
             keep_back,
             received: 0,
+            tolerance: match planner.mode {
+                PathMode::Blend { tolerance } => tolerance,
+                PathMode::ExactStop | PathMode::ExactPath => 0.0,
+            },
+            default_tolerance: planner.default_tolerance,
+            merge: 0.0,
         }
     }
 
@@ -180,8 +231,20 @@ impl PathWindow {
     pub fn push(&mut self, canon: &Canon) -> Vec<[f64; 3]> {
         self.received += 1;
         let number = self.received;
+        let allowed = self.tolerance + self.merge;
         let mut added = Vec::new();
         match &canon.cmd {
+            // The planner's reading of the path modes (`Planner::plan`).
+            CanonCmd::SetMotionControlMode(mode) => {
+                self.tolerance = match *mode {
+                    MotionMode::ExactStop | MotionMode::ExactPath => 0.0,
+                    MotionMode::Continuous { tolerance } if tolerance <= 0.0 => {
+                        self.default_tolerance
+                    }
+                    MotionMode::Continuous { tolerance } => tolerance,
+                }
+            }
+            CanonCmd::SetNaivecamTolerance { tolerance } => self.merge = tolerance.max(0.0),
             CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
                 if end.to_array() != self.last_end =>
             {
@@ -190,6 +253,8 @@ impl PathWindow {
                     number,
                     start: self.last_end,
                     end,
+                    allowed,
+                    sag: 0.0,
                 });
                 self.last_end = end;
                 added.push([end[0], end[1], end[2]]);
@@ -210,7 +275,7 @@ impl PathWindow {
                 );
                 let shape = Shape::Arc(arc);
                 let radius = arc.radius.max(arc.end_radius).max(1e-9);
-                let step = 2.0 * (1.0 - 1e-4 / radius).clamp(-1.0, 1.0).acos();
+                let step = 2.0 * (1.0 - CHORD_SAG / radius).clamp(-1.0, 1.0).acos();
                 let n = ((arc.sweep.abs() / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
                 let len = shape.length();
                 let mut from = self.last_end;
@@ -220,6 +285,8 @@ impl PathWindow {
                         number,
                         start: from,
                         end: to,
+                        allowed,
+                        sag: CHORD_SAG,
                     });
                     added.push([to[0], to[1], to[2]]);
                     from = to;
@@ -232,9 +299,10 @@ impl PathWindow {
     }
 
     /// XYZ distance of `p` from the nearest of the programmed moves
-    /// `moves` (and of those kept behind them); `None` if none of them is
-    /// geometry (before any move).
-    pub fn distance(&mut self, p: &Position, moves: SourceMoves) -> Option<f64> {
+    /// `moves` (and of those kept behind them), and the largest deviation
+    /// the program allows along those moves (G64 P plus Q, mm); `None` if
+    /// none of them is geometry (before any move).
+    pub fn distance(&mut self, p: &Position, moves: SourceMoves) -> Option<Deviation> {
         let length = |m: &Programmed| {
             (0..3)
                 .map(|i| (m.end[i] - m.start[i]).powi(2))
@@ -252,13 +320,22 @@ impl PathWindow {
         }
         self.moves.drain(..before - keep);
         let p = p.to_array();
-        let near = self
-            .moves
-            .iter()
-            .take_while(|m| m.number <= moves.last)
-            .map(|m| distance_to_segment(&p, &m.start, &m.end))
-            .fold(f64::INFINITY, f64::min);
-        near.is_finite().then_some(near)
+        let mut found = Deviation {
+            distance: f64::INFINITY,
+            allowed: 0.0,
+            precision: 0.0,
+        };
+        for m in self.moves.iter().take_while(|m| m.number <= moves.last) {
+            let d = distance_to_segment(&p, &m.start, &m.end);
+            if d < found.distance {
+                found.distance = d;
+                found.precision = m.sag;
+            }
+            if m.number >= moves.first {
+                found.allowed = found.allowed.max(m.allowed);
+            }
+        }
+        found.distance.is_finite().then_some(found)
     }
 }
 
@@ -333,7 +410,7 @@ pub fn run_operated(
     let mut queue: VecDeque<Segment> = VecDeque::new();
     let mut executor = Executor::new(start);
     let mut report = Report::default();
-    let mut programmed = PathWindow::new(start, 0.0);
+    let mut programmed = PathWindow::new(start, 0.0, &config.planner);
     let njoints = kins.joints().len();
 
     let axis_specs = kins.axes().to_vec();
@@ -398,9 +475,14 @@ pub fn run_operated(
         // Deviation: distance to the nearest of the programmed moves the
         // executing segment runs along (a blend sits between two, a line
         // merged under G64 Q stands for many).
-        if let Some(near) = programmed.distance(&sample.position, sample.moves) {
-            if near > report.max_deviation {
-                report.max_deviation = near;
+        if let Some(d) = programmed.distance(&sample.position, sample.moves) {
+            if d.over() > report.over_tolerance {
+                report.over_tolerance = d.over();
+                report.over_tolerance_at = (time, sample.line);
+            }
+            if d.distance > report.max_deviation {
+                report.max_deviation = d.distance;
+                report.max_deviation_allowed = d.allowed;
                 report.max_deviation_at = (time, sample.line);
             }
         }

@@ -180,6 +180,8 @@ pub fn plan(
             json!({
                 "cycle_time_s": report.cycle_time,
                 "max_deviation_mm": report.max_deviation,
+                "max_deviation_allowed_mm": report.max_deviation_allowed,
+                "over_tolerance_mm": report.over_tolerance,
                 "max_limit_ratio": report.max_limit_ratio(),
                 "segments": report.segments,
                 "guard_takeovers": report.guard_takeovers,
@@ -194,6 +196,21 @@ pub fn plan(
     Ok(())
 }
 
+/// Deviation beyond the program's tolerance that is rounding, not a path
+/// leaving it, mm: positions along the path carry about 1e-13 mm of it.
+const TOLERANCE_ROUNDING: f64 = 1e-9;
+
+/// What the program allowed where the deviation was largest, in words.
+fn allowance(allowed: f64) -> String {
+    if allowed == 0.0 {
+        "exact path there".to_string()
+    } else if allowed.is_finite() {
+        format!("P + Q = {allowed:.6} mm there")
+    } else {
+        "G64 without a limit there".to_string()
+    }
+}
+
 fn print_report(machine: &str, period: f64, report: &Report) -> std::io::Result<()> {
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
@@ -203,9 +220,19 @@ fn print_report(machine: &str, period: f64, report: &Report) -> std::io::Result<
     writeln!(out, "segments         {}", report.segments)?;
     writeln!(
         out,
-        "max deviation    {:.6} mm (line {} at {:.3} s)",
-        report.max_deviation, report.max_deviation_at.1, report.max_deviation_at.0
+        "max deviation    {:.6} mm (line {} at {:.3} s; {})",
+        report.max_deviation,
+        report.max_deviation_at.1,
+        report.max_deviation_at.0,
+        allowance(report.max_deviation_allowed)
     )?;
+    if report.over_tolerance > TOLERANCE_ROUNDING {
+        writeln!(
+            out,
+            "over tolerance   {:.6} mm (line {} at {:.3} s)",
+            report.over_tolerance, report.over_tolerance_at.1, report.over_tolerance_at.0
+        )?;
+    }
     writeln!(out, "max limit use    {:.6}", report.max_limit_ratio())?;
     writeln!(out, "guard takeovers  {}", report.guard_takeovers)?;
     writeln!(out)?;
