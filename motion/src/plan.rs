@@ -1722,9 +1722,11 @@ impl<'k> Planner<'k> {
     /// A marker that acts at rest (a dwell, an M66 wait, a program stop,
     /// an immediate output): everything before it runs to rest first.
     fn marker_at_rest(&mut self, line: u32, kind: SegmentKind) {
+        // Finishing may plan held merged lines, which set their own reading.
+        let reading = self.reading;
         self.finish();
         self.ready.push_back(Segment {
-            reading: self.reading,
+            reading,
             ..Segment::marker(kind, line, self.position)
         });
     }
