@@ -156,7 +156,7 @@ struct Programmed {
     sag: f64,
 }
 
-/// Sag of the chords an arc is kept as, mm.
+/// Sag of the chords an arc is kept as, mm (at most 100,000 of them).
 const CHORD_SAG: f64 = 1e-4;
 
 /// How far a point is from the programmed path ([`PathWindow::distance`]).
@@ -277,6 +277,8 @@ impl PathWindow {
                 let radius = arc.radius.max(arc.end_radius).max(1e-9);
                 let step = 2.0 * (1.0 - CHORD_SAG / radius).clamp(-1.0, 1.0).acos();
                 let n = ((arc.sweep.abs() / step.max(1e-6)).ceil() as usize).clamp(1, 100_000);
+                // CHORD_SAG, or more on an arc too long for 100,000 chords.
+                let sag = radius * (1.0 - (arc.sweep.abs() / (2.0 * n as f64)).cos());
                 let len = shape.length();
                 let mut from = self.last_end;
                 for k in 1..=n {
@@ -286,7 +288,7 @@ impl PathWindow {
                         start: from,
                         end: to,
                         allowed,
-                        sag: CHORD_SAG,
+                        sag,
                     });
                     added.push([to[0], to[1], to[2]]);
                     from = to;
