@@ -6,9 +6,12 @@
 //!
 //! The suite runs the `violation_checks` programs (the ones that once made
 //! LinuxCNC's own planner break a limit) at 1 ms; the whole corpus, at
-//! 1 ms and at 250 µs, runs on demand:
+//! 1 ms and at 250 µs, and the corpus moved into the workspaces of the
+//! parallel machines (oxglide-x, oxglide-o, rfmt5), where joint limits
+//! bind, run on demand:
 //! `cargo test --release --test linuxcnc_programs -- --ignored --nocapture`
-//! (about two minutes; stellabee1.ngc is left to `cargo bench --bench motion`).
+//! (about three minutes; stellabee1.ngc is left to `cargo bench --bench
+//! motion`).
 
 #[path = "support/shared.rs"]
 mod shared;
@@ -190,30 +193,75 @@ fn allowed_deviation(file: &Path, tools: &Path) -> f64 {
     p + q
 }
 
-/// Plans every program of `list` at `period_us`; returns the failures,
-/// one line each, and prints what each program read.
+/// Plans every program of `list` at `period_us` on the nine-axis machine;
+/// returns the failures, one line each, and prints what each program read.
 fn plan_all(root: &Path, list: &[String], period_us: u32) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     let machine = machine_file(dir.path());
+    let mut planned = 0;
+    plan_on(
+        root,
+        list,
+        &machine.to_string_lossy(),
+        None,
+        period_us,
+        &mut planned,
+    )
+}
+
+/// Plans every program of `list` on `machine` at `period_us`, moved by a
+/// G54 offset of `shift` (G10 L2 P1 words) when given, and counts in
+/// `planned` those that were planned. Out of a shifted program's travel
+/// is a refusal it may give; any other must be in [`REFUSED`]. Returns
+/// the failures, one line each.
+fn plan_on(
+    root: &Path,
+    list: &[String],
+    machine: &str,
+    shift: Option<&str>,
+    period_us: u32,
+    planned: &mut usize,
+) -> Vec<String> {
+    let dir = tempfile::tempdir().unwrap();
     let tools = root.join("generic-tools.tbl");
     let mut failures = Vec::new();
     for rel in list {
-        let file = root.join(rel);
+        let mut file = root.join(rel);
+        if let Some(shift) = shift {
+            // The offset goes first, after a leading `%` line if there is one.
+            let text = std::fs::read_to_string(&file).unwrap();
+            let (head, body) = if text.trim_start().starts_with('%') {
+                text.split_at(text.find('\n').map_or(text.len(), |n| n + 1))
+            } else {
+                ("", text.as_str())
+            };
+            let moved = format!("{head}G21 G10 L2 P1 {shift}\nG54\n{body}");
+            file = dir.path().join(rel.replace('/', "_"));
+            std::fs::write(&file, moved).unwrap();
+        }
         let out = Command::new(env!("CARGO_BIN_EXE_kerf"))
             .arg("plan")
             .arg(&file)
             .arg("--machine")
-            .arg(&machine)
+            .arg(machine)
             .arg("--tool-table")
             .arg(&tools)
             .args(["--json", "--period-us", &period_us.to_string()])
+            .current_dir(root.join(rel).parent().unwrap())
             .output()
             .unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
         let refusal = REFUSED.iter().find(|(p, _)| p == rel);
+        let out_of_travel = shift.is_some()
+            && (stderr.contains("move leaves the machine's limits")
+                || stderr.contains("is not on this machine"));
         match (out.status.success(), refusal) {
             (false, Some((_, why))) if stderr.contains(why) => {
                 println!("{rel}: refused as expected");
+                continue;
+            }
+            (false, None) if out_of_travel => {
+                println!("{rel}: outside the machine's travel");
                 continue;
             }
             (false, _) => {
@@ -226,11 +274,12 @@ fn plan_all(root: &Path, list: &[String], period_us: u32) -> Vec<String> {
             }
             (true, None) => {}
         }
+        *planned += 1;
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         let limit = report["max_limit_ratio"].as_f64().unwrap();
         let deviation = report["max_deviation_mm"].as_f64().unwrap();
         let over = report["over_tolerance_mm"].as_f64().unwrap();
-        let allowed = allowed_deviation(&file, &tools);
+        let allowed = allowed_deviation(&root.join(rel), &tools);
         println!(
             "{rel}: {:.3} s, deviation {deviation:.4} mm (allowed {allowed:.4}), limit use {limit:.9}",
             report["cycle_time_s"].as_f64().unwrap()
@@ -284,6 +333,42 @@ fn every_linuxcnc_program_plans_within_limits_and_tolerance() {
                 .into_iter()
                 .map(|f| format!("{period_us} µs: {f}")),
         );
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+#[ignore = "forty seconds in a release build; run on demand"]
+fn linuxcnc_programs_keep_the_parallel_machines_joints_within_limits() {
+    let Some(root) = programs_dir() else {
+        eprintln!("skipped: ../shared/conformance/linuxcnc-programs not found");
+        return;
+    };
+    // Programs refused whatever the machine are the nine-axis test's.
+    let list: Vec<String> = programs(&root, "")
+        .into_iter()
+        .filter(|p| p != LEFT_TO_THE_BENCH && !REFUSED.iter().any(|(r, _)| r == p))
+        .collect();
+    // Each machine's workspace centre (near its home), and the programs
+    // that fit it when this was written: a floor, so that a shift gone
+    // wrong cannot pass by refusing everything.
+    let machines = [
+        ("oxglide-x", "X255 Y200 Z-330", 120),
+        ("oxglide-o", "X252 Y200 Z-350", 60),
+        ("rfmt5", "X150 Y100 Z100", 140),
+    ];
+    let mut failures = Vec::new();
+    for (machine, shift, floor) in machines {
+        let mut planned = 0;
+        failures.extend(
+            plan_on(&root, &list, machine, Some(shift), 1000, &mut planned)
+                .into_iter()
+                .map(|f| format!("{machine}: {f}")),
+        );
+        println!("{machine}: {planned} of {} programs planned", list.len());
+        if planned < floor {
+            failures.push(format!("{machine}: only {planned} programs planned"));
+        }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
