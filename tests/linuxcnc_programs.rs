@@ -198,30 +198,22 @@ fn allowed_deviation(file: &Path, tools: &Path) -> f64 {
 fn plan_all(root: &Path, list: &[String], period_us: u32) -> Vec<String> {
     let dir = tempfile::tempdir().unwrap();
     let machine = machine_file(dir.path());
-    let mut planned = 0;
-    plan_on(
-        root,
-        list,
-        &machine.to_string_lossy(),
-        None,
-        period_us,
-        &mut planned,
-    )
+    plan_on(root, list, &machine.to_string_lossy(), None, period_us).0
 }
 
 /// Plans every program of `list` on `machine` at `period_us`, moved by a
-/// G54 offset of `shift` (G10 L2 P1 words) when given, and counts in
-/// `planned` those that were planned. Out of a shifted program's travel
-/// is a refusal it may give; any other must be in [`REFUSED`]. Returns
-/// the failures, one line each.
+/// G54 offset of `shift` (G10 L2 P1 words) when given. Out of a shifted
+/// program's travel is a refusal it may give; any other must be in
+/// [`REFUSED`]. Returns the failures, one line each, and how many
+/// programs were planned.
 fn plan_on(
     root: &Path,
     list: &[String],
     machine: &str,
     shift: Option<&str>,
     period_us: u32,
-    planned: &mut usize,
-) -> Vec<String> {
+) -> (Vec<String>, usize) {
+    let mut planned = 0;
     let dir = tempfile::tempdir().unwrap();
     let tools = root.join("generic-tools.tbl");
     let mut failures = Vec::new();
@@ -274,7 +266,7 @@ fn plan_on(
             }
             (true, None) => {}
         }
-        *planned += 1;
+        planned += 1;
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         let limit = report["max_limit_ratio"].as_f64().unwrap();
         let deviation = report["max_deviation_mm"].as_f64().unwrap();
@@ -296,7 +288,7 @@ fn plan_on(
             ));
         }
     }
-    failures
+    (failures, planned)
 }
 
 #[test]
@@ -359,12 +351,8 @@ fn linuxcnc_programs_keep_the_parallel_machines_joints_within_limits() {
     ];
     let mut failures = Vec::new();
     for (machine, shift, floor) in machines {
-        let mut planned = 0;
-        failures.extend(
-            plan_on(&root, &list, machine, Some(shift), 1000, &mut planned)
-                .into_iter()
-                .map(|f| format!("{machine}: {f}")),
-        );
+        let (failed, planned) = plan_on(&root, &list, machine, Some(shift), 1000);
+        failures.extend(failed.into_iter().map(|f| format!("{machine}: {f}")));
         println!("{machine}: {planned} of {} programs planned", list.len());
         if planned < floor {
             failures.push(format!("{machine}: only {planned} programs planned"));
