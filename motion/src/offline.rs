@@ -105,9 +105,9 @@ pub struct Report {
     /// the largest over the moves the segment spans.
     pub max_deviation_allowed: f64,
     /// The most the deviation went beyond what the program allowed where
-    /// it happened, by more than the measure's precision (0.1 µm on arcs,
-    /// kept as chords), mm (0: within it everywhere), and where: time (s)
-    /// and source line.
+    /// it happened, by more than the measure's precision (0.1 µm on
+    /// helices, kept as chords), mm (0: within it everywhere), and where:
+    /// time (s) and source line.
     pub over_tolerance: f64,
     pub over_tolerance_at: (f64, u32),
     pub axes: Vec<LimitUse>,
@@ -141,33 +141,98 @@ pub struct RunConfig {
     pub record: usize,
 }
 
-/// A programmed move (or a chord of a programmed arc), kept while the
+/// A programmed move (or a chord of a programmed helix), kept while the
 /// machine may still be near it.
 #[derive(Clone, Copy, Debug)]
 struct Programmed {
     /// The canon command's number ([`SourceMoves`]).
     number: u64,
-    start: Vec9,
-    end: Vec9,
+    piece: Piece,
     /// The deviation the program allows along it: G64 P plus Q, mm.
     allowed: f64,
-    /// How far the programmed path may lie from this line, mm: 0 for a
-    /// line, the sag for a chord of an arc.
-    sag: f64,
 }
 
-/// Sag of the chords an arc is kept as, mm (at most 100,000 of them).
+/// The geometry of a [`Programmed`] move.
+#[derive(Clone, Copy, Debug)]
+enum Piece {
+    /// A line, or a chord of a helix, which lies within `sag` mm of it.
+    Line { start: Vec9, end: Vec9, sag: f64 },
+    /// An arc (or the spiral a hair off one that programs' rounded end
+    /// points make) in a plane of X Y Z whose third axis stays put:
+    /// measured exactly ([`flat_arc_distance`]).
+    FlatArc(Arc),
+}
+
+impl Piece {
+    /// XYZ distance from `p`, and how far the programmed path may lie
+    /// from what was measured, mm.
+    fn distance(&self, p: &Vec9) -> (f64, f64) {
+        match self {
+            Piece::Line { start, end, sag } => (distance_to_segment(p, start, end), *sag),
+            Piece::FlatArc(arc) => (flat_arc_distance(p, arc), 0.0),
+        }
+    }
+
+    /// XYZ length, mm.
+    fn length(&self) -> f64 {
+        match self {
+            Piece::Line { start, end, .. } => (0..3)
+                .map(|i| (end[i] - start[i]).powi(2))
+                .sum::<f64>()
+                .sqrt(),
+            Piece::FlatArc(arc) => Shape::Arc(*arc).length(),
+        }
+    }
+}
+
+/// The arc's third X Y Z axis when `arc` lies in a plane of X Y Z and does
+/// not move that axis (no helix), so that [`flat_arc_distance`] applies.
+fn flat(arc: &Arc) -> Option<usize> {
+    let (i, j) = arc.plane;
+    if i > 2 || j > 2 || arc.sweep == 0.0 {
+        return None;
+    }
+    let k = 3 - i - j;
+    (arc.start[k] == arc.end[k]).then_some(k)
+}
+
+/// XYZ distance from `p` to a flat arc ([`flat`]): to its point at `p`'s
+/// angle about the centre, on every turn the sweep makes there, or to an
+/// end. On a circle that is the exact distance. On the logarithmic spiral
+/// a rounded end point makes (radius r·e^(g·θ), g a millionth or so) it is
+/// the distance to a point of the path, above the exact one by about
+/// g²·r·D/(2ρ) for a point D from the path and ρ from the centre: for a
+/// point near the path, g²·D/2, a trillionth of D.
+fn flat_arc_distance(p: &Vec9, arc: &Arc) -> f64 {
+    let d =
+        |q: &Vec9| ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2)).sqrt();
+    let (i, j) = arc.plane;
+    let phi = (p[j] - arc.center.1).atan2(p[i] - arc.center.0);
+    let sweep = arc.sweep.abs();
+    // The angle from the start in the sweep's direction, on the first turn.
+    let mut along =
+        ((phi - arc.start_angle) * arc.sweep.signum()).rem_euclid(std::f64::consts::TAU);
+    let mut best = d(&arc.start).min(d(&arc.end));
+    while along <= sweep {
+        best = best.min(d(&arc.point_at_fraction(along / sweep)));
+        along += std::f64::consts::TAU;
+    }
+    best
+}
+
+/// Sag of the chords a helix is kept as, and of the points plots get for
+/// any arc, mm (at most 100,000 of them).
 const CHORD_SAG: f64 = 1e-4;
 
 /// How far a point is from the programmed path ([`PathWindow::distance`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Deviation {
-    /// Distance from the nearest programmed move (arcs as chords), mm.
+    /// Distance from the nearest programmed move (helices as chords), mm.
     pub distance: f64,
     /// What the program allows along the moves spanned: G64 P plus Q, mm.
     pub allowed: f64,
-    /// How precise `distance` is, mm: the sag of the chord it was measured
-    /// to (0 on lines).
+    /// How precise `distance` is, mm: the sag of the chord of a helix it
+    /// was measured to (0 on lines and arcs).
     pub precision: f64,
 }
 
@@ -179,7 +244,7 @@ impl Deviation {
     }
 }
 
-/// The programmed moves (arcs as fine chords) near where the machine is,
+/// The programmed moves (helices as fine chords) near where the machine is,
 /// to measure how far a point is from the path.
 ///
 /// Every canon command given to the planner must be given to
@@ -225,8 +290,9 @@ impl PathWindow {
 
     /// Record `canon` (numbering it as the planner does) and its move, if
     /// it is one; returns the XYZ points it adds to the path (for plots).
-    /// Arcs are kept as chords whose sag is under 0.1 µm, so distances to
-    /// them are distances to the arc to that precision; a move that goes
+    /// Arcs in a plane of X Y Z are kept whole and measured exactly;
+    /// helices as chords whose sag is under 0.1 µm, so distances to them
+    /// are distances to the helix to that precision. A move that goes
     /// nowhere (an F word alone on a G1 line) is no geometry.
     pub fn push(&mut self, canon: &Canon) -> Vec<[f64; 3]> {
         self.received += 1;
@@ -251,10 +317,12 @@ impl PathWindow {
                 let end = end.to_array();
                 self.moves.push_back(Programmed {
                     number,
-                    start: self.last_end,
-                    end,
+                    piece: Piece::Line {
+                        start: self.last_end,
+                        end,
+                        sag: 0.0,
+                    },
                     allowed,
-                    sag: 0.0,
                 });
                 self.last_end = end;
                 added.push([end[0], end[1], end[2]]);
@@ -280,16 +348,28 @@ impl PathWindow {
                 // CHORD_SAG, or more on an arc too long for 100,000 chords.
                 let sag = radius * (1.0 - (arc.sweep.abs() / (2.0 * n as f64)).cos());
                 let len = shape.length();
+                let is_flat = flat(&arc).is_some();
+                if is_flat {
+                    self.moves.push_back(Programmed {
+                        number,
+                        piece: Piece::FlatArc(arc),
+                        allowed,
+                    });
+                }
                 let mut from = self.last_end;
                 for k in 1..=n {
                     let to = shape.point(len * k as f64 / n as f64);
-                    self.moves.push_back(Programmed {
-                        number,
-                        start: from,
-                        end: to,
-                        allowed,
-                        sag,
-                    });
+                    if !is_flat {
+                        self.moves.push_back(Programmed {
+                            number,
+                            piece: Piece::Line {
+                                start: from,
+                                end: to,
+                                sag,
+                            },
+                            allowed,
+                        });
+                    }
                     added.push([to[0], to[1], to[2]]);
                     from = to;
                 }
@@ -305,19 +385,13 @@ impl PathWindow {
     /// the program allows along those moves (G64 P plus Q, mm); `None` if
     /// none of them is geometry (before any move).
     pub fn distance(&mut self, p: &Position, moves: SourceMoves) -> Option<Deviation> {
-        let length = |m: &Programmed| {
-            (0..3)
-                .map(|i| (m.end[i] - m.start[i]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        };
         // Drop what lies wholly more than keep_back behind the first move
         // spanned: segments run in order, and their spans never go back.
         let before = self.moves.partition_point(|m| m.number < moves.first);
         let mut behind = 0.0;
         let mut keep = 0;
         while keep < before && behind < self.keep_back {
-            behind += length(&self.moves[before - 1 - keep]);
+            behind += self.moves[before - 1 - keep].piece.length();
             keep += 1;
         }
         self.moves.drain(..before - keep);
@@ -328,10 +402,10 @@ impl PathWindow {
             precision: 0.0,
         };
         for m in self.moves.iter().take_while(|m| m.number <= moves.last) {
-            let d = distance_to_segment(&p, &m.start, &m.end);
+            let (d, precision) = m.piece.distance(&p);
             if d < found.distance {
                 found.distance = d;
-                found.precision = m.sag;
+                found.precision = precision;
             }
             if m.number >= moves.first {
                 found.allowed = found.allowed.max(m.allowed);
@@ -526,4 +600,76 @@ pub fn run_operated(
         }
     }
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The distance to a flat arc against the least distance to 50,000
+    /// points along it, on circles and the spirals rounded end points make
+    /// (end radius a little off), either way round, in every plane of
+    /// X Y Z, with the far axis off the plane, sweeps up to three turns, and
+    /// points near the path, at the centre and far away.
+    #[test]
+    fn a_flat_arc_is_measured_as_closely_as_its_points() {
+        let mut rng = crate::testkit::uniform(11);
+        for case in 0..30 {
+            let plane = [(0, 1), (2, 0), (1, 2)][case % 3];
+            let k = 3 - plane.0 - plane.1;
+            let r = 0.5 + 50.0 * rng();
+            let a0 = std::f64::consts::TAU * rng();
+            let turns = 1 + (case / 10) as i32;
+            let sweep = (0.05 + rng() * (std::f64::consts::TAU - 0.1))
+                * if rng() < 0.5 { -1.0 } else { 1.0 };
+            let end_angle = a0 + sweep;
+            let off = 1.0 + (rng() - 0.5) * 2e-4;
+            let mut start = [0.0; 9];
+            start[plane.0] = 10.0 + r * a0.cos();
+            start[plane.1] = -5.0 + r * a0.sin();
+            start[k] = 3.0;
+            let mut end = start;
+            end[plane.0] = 10.0 + r * off * end_angle.cos();
+            end[plane.1] = -5.0 + r * off * end_angle.sin();
+            let dir = if sweep > 0.0 { turns } else { -turns };
+            let arc = Arc::from_program(&start, &end, plane, (10.0, -5.0), dir);
+            assert_eq!(flat(&arc), Some(k), "case {case}");
+            let shape = Shape::Arc(arc);
+            let len = shape.length();
+            let points: Vec<Vec9> = (0..=50_000)
+                .map(|n| shape.point(len * n as f64 / 50_000.0))
+                .collect();
+            for _ in 0..5 {
+                let mut p = shape.point(len * rng());
+                let scale = [1e-3, 0.05, 2.0 * r][(rng() * 3.0) as usize];
+                for q in p.iter_mut().take(3) {
+                    *q += (rng() - 0.5) * scale;
+                }
+                if rng() < 0.05 {
+                    p[plane.0] = 10.0;
+                    p[plane.1] = -5.0;
+                }
+                let d = |q: &Vec9| (0..3).map(|i| (p[i] - q[i]).powi(2)).sum::<f64>().sqrt();
+                let sampled = points.iter().map(d).fold(f64::INFINITY, f64::min);
+                let exact = flat_arc_distance(&p, &arc);
+                // Points 2π·r·turns / 50,000 apart miss the nearest by at
+                // most half that along the path, which costs its square
+                // over twice the distance (and at most that much).
+                let step = len / 50_000.0;
+                let slack = (step * step / (2.0 * sampled.max(1e-9))).min(step) + 1e-9;
+                // On a spiral the point at p's angle is off the nearest
+                // (see flat_arc_distance), by at most the spiral's change
+                // of radius.
+                let growth = (arc.end_radius / arc.radius).ln().abs() / arc.sweep.abs();
+                let rho = (p[plane.0] - 10.0).hypot(p[plane.1] + 5.0);
+                let over = (growth * growth * r * sampled / (2.0 * rho))
+                    .min(growth * arc.sweep.abs() * r * 1.01)
+                    + 1e-9;
+                assert!(
+                    exact <= sampled + over && exact >= sampled - slack,
+                    "case {case}: exact {exact}, sampled {sampled}"
+                );
+            }
+        }
+    }
 }
