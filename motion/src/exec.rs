@@ -3033,9 +3033,11 @@ mod simulation {
         assert!(peak > 99.0, "{peak}");
     }
 
-    #[test]
-    fn single_block_runs_one_line_per_step() {
-        let mut q = planned("G1 X10 F3000\nX20\nX30\nM2\n", PathMode::ExactPath);
+    /// `text` planned for exact path and run in single block, with a
+    /// `step` every 1000 periods from the start: the samples, and how many
+    /// steps were given before the run ended.
+    fn stepped(text: &str) -> (Vec<Sample>, usize) {
+        let mut q = planned(text, PathMode::ExactPath);
         let mut steps = 0;
         let out = run(&mut q, |n, ex| {
             if n == 0 {
@@ -3046,6 +3048,12 @@ mod simulation {
                 steps += 1;
             }
         });
+        (out, steps)
+    }
+
+    #[test]
+    fn single_block_runs_one_line_per_step() {
+        let (out, steps) = stepped("G1 X10 F3000\nX20\nX30\nM2\n");
         let at = |n: usize| out[n].position.x;
         // After each step the tool rests at the end of one line, and waits.
         assert_eq!(at(998), 10.0);
@@ -3061,18 +3069,8 @@ mod simulation {
     /// Told apart by line alone, the three passes ran as one step.
     #[test]
     fn single_block_runs_one_pass_of_a_loop_per_step() {
-        let text = "#1=1\nO1 while [#1 LE 3]\nG1 X[#1*10] F3000\n#1=[#1+1]\nO1 endwhile\nM2\n";
-        let mut q = planned(text, PathMode::ExactPath);
-        let mut steps = 0;
-        let out = run(&mut q, |n, ex| {
-            if n == 0 {
-                ex.set_single_block(true);
-            }
-            if n % 1000 == 0 {
-                ex.step();
-                steps += 1;
-            }
-        });
+        let (out, steps) =
+            stepped("#1=1\nO1 while [#1 LE 3]\nG1 X[#1*10] F3000\n#1=[#1+1]\nO1 endwhile\nM2\n");
         let at = |n: usize| out[n].position.x;
         assert_eq!((at(998), at(999)), (10.0, 10.0), "the first pass");
         assert_eq!((at(1998), at(1999)), (20.0, 20.0), "the second pass");
