@@ -8,7 +8,7 @@
 
 use std::collections::VecDeque;
 
-use kerf_interp::{Canon, CanonCmd, InterpError, MotionMode, Position};
+use kerf_interp::{Canon, CanonCmd, InterpError, Position};
 
 use crate::exec::Executor;
 use crate::kinematics::{Kinematics, Limits, MAX_JOINTS};
@@ -185,18 +185,14 @@ impl Piece {
     }
 }
 
-/// The arc's third X Y Z axis when `arc` lies in a plane of X Y Z and does
-/// not move that axis (no helix), so that [`flat_arc_distance`] applies.
-fn flat(arc: &Arc) -> Option<usize> {
+/// Whether `arc` lies in a plane of X Y Z and does not move the third of
+/// them (no helix), so that [`flat_arc_distance`] applies.
+fn is_flat(arc: &Arc) -> bool {
     let (i, j) = arc.plane;
-    if i > 2 || j > 2 || arc.sweep == 0.0 {
-        return None;
-    }
-    let k = 3 - i - j;
-    (arc.start[k] == arc.end[k]).then_some(k)
+    i <= 2 && j <= 2 && arc.sweep != 0.0 && arc.start[3 - i - j] == arc.end[3 - i - j]
 }
 
-/// XYZ distance from `p` to a flat arc ([`flat`]): to its point at `p`'s
+/// XYZ distance from `p` to a flat arc ([`is_flat`]): to its point at `p`'s
 /// angle about the centre, on every turn the sweep makes there, or to an
 /// end. On a circle that is the exact distance. On the logarithmic spiral
 /// a rounded end point makes (radius r·e^(g·θ), g a millionth or so) it is
@@ -279,10 +275,7 @@ impl PathWindow {
             last_end: start.to_array(),
             keep_back,
             received: 0,
-            tolerance: match planner.mode {
-                PathMode::Blend { tolerance } => tolerance,
-                PathMode::ExactStop | PathMode::ExactPath => 0.0,
-            },
+            tolerance: planner.mode.tolerance(),
             default_tolerance: planner.default_tolerance,
             merge: 0.0,
         }
@@ -300,15 +293,8 @@ impl PathWindow {
         let allowed = self.tolerance + self.merge;
         let mut added = Vec::new();
         match &canon.cmd {
-            // The planner's reading of the path modes (`Planner::plan`).
             CanonCmd::SetMotionControlMode(mode) => {
-                self.tolerance = match *mode {
-                    MotionMode::ExactStop | MotionMode::ExactPath => 0.0,
-                    MotionMode::Continuous { tolerance } if tolerance <= 0.0 => {
-                        self.default_tolerance
-                    }
-                    MotionMode::Continuous { tolerance } => tolerance,
-                }
+                self.tolerance = PathMode::from_program(*mode, self.default_tolerance).tolerance()
             }
             CanonCmd::SetNaivecamTolerance { tolerance } => self.merge = tolerance.max(0.0),
             CanonCmd::StraightTraverse { end } | CanonCmd::StraightFeed { end }
@@ -348,8 +334,8 @@ impl PathWindow {
                 // CHORD_SAG, or more on an arc too long for 100,000 chords.
                 let sag = radius * (1.0 - (arc.sweep.abs() / (2.0 * n as f64)).cos());
                 let len = shape.length();
-                let is_flat = flat(&arc).is_some();
-                if is_flat {
+                let flat = is_flat(&arc);
+                if flat {
                     self.moves.push_back(Programmed {
                         number,
                         piece: Piece::FlatArc(arc),
@@ -359,7 +345,7 @@ impl PathWindow {
                 let mut from = self.last_end;
                 for k in 1..=n {
                     let to = shape.point(len * k as f64 / n as f64);
-                    if !is_flat {
+                    if !flat {
                         self.moves.push_back(Programmed {
                             number,
                             piece: Piece::Line {
@@ -633,7 +619,7 @@ mod tests {
             end[plane.1] = -5.0 + r * off * end_angle.sin();
             let dir = if sweep > 0.0 { turns } else { -turns };
             let arc = Arc::from_program(&start, &end, plane, (10.0, -5.0), dir);
-            assert_eq!(flat(&arc), Some(k), "case {case}");
+            assert!(is_flat(&arc), "case {case}");
             let shape = Shape::Arc(arc);
             let len = shape.length();
             let points: Vec<Vec9> = (0..=50_000)

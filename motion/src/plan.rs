@@ -233,6 +233,31 @@ pub enum PathMode {
     Blend { tolerance: f64 },
 }
 
+impl PathMode {
+    /// The mode a program's G61, G61.1 or G64 asks for, as the planner
+    /// follows it. G64 without P lets LinuxCNC deviate as far as speed
+    /// wants; kerf keeps to `default_tolerance` (mm) instead.
+    pub fn from_program(mode: MotionMode, default_tolerance: f64) -> PathMode {
+        match mode {
+            MotionMode::ExactStop => PathMode::ExactStop,
+            MotionMode::ExactPath => PathMode::ExactPath,
+            MotionMode::Continuous { tolerance } if tolerance <= 0.0 => PathMode::Blend {
+                tolerance: default_tolerance,
+            },
+            MotionMode::Continuous { tolerance } => PathMode::Blend { tolerance },
+        }
+    }
+
+    /// How far the path may leave the programmed one at a corner, mm (0
+    /// for the exact modes).
+    pub fn tolerance(&self) -> f64 {
+        match *self {
+            PathMode::Blend { tolerance } => tolerance,
+            PathMode::ExactStop | PathMode::ExactPath => 0.0,
+        }
+    }
+}
+
 /// Planner settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlannerConfig {
@@ -1544,16 +1569,7 @@ impl<'k> Planner<'k> {
             CanonCmd::SetSpindleSpeed { rpm, .. } => self.spindle_rpm = *rpm,
             CanonCmd::ForceControl { target } => self.force_control = *target,
             CanonCmd::SetMotionControlMode(mode) => {
-                self.mode = match *mode {
-                    MotionMode::ExactStop => PathMode::ExactStop,
-                    MotionMode::ExactPath => PathMode::ExactPath,
-                    // G64 without P: LinuxCNC allows any deviation for speed;
-                    // kerf keeps to the machine's default tolerance instead.
-                    MotionMode::Continuous { tolerance } if tolerance <= 0.0 => PathMode::Blend {
-                        tolerance: self.config.default_tolerance,
-                    },
-                    MotionMode::Continuous { tolerance } => PathMode::Blend { tolerance },
-                }
+                self.mode = PathMode::from_program(*mode, self.config.default_tolerance)
             }
             CanonCmd::Dwell { seconds } => {
                 self.marker_at_rest(line, SegmentKind::Dwell { seconds: *seconds })
