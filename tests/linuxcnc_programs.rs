@@ -150,8 +150,14 @@ fn machine_file(dir: &Path) -> PathBuf {
     path
 }
 
+/// The corpus, or `None` (saying the test is skipped) where the shared
+/// conformance material is not checked out.
 fn programs_dir() -> Option<PathBuf> {
-    shared::conformance_dir("linuxcnc-programs", "programs.tsv")
+    let found = shared::conformance_dir("linuxcnc-programs", "programs.tsv");
+    if found.is_none() {
+        eprintln!("skipped: ../shared/conformance/linuxcnc-programs not found");
+    }
+    found
 }
 
 /// The programs under `root`/`under`, as paths relative to `root`.
@@ -294,7 +300,6 @@ fn plan_on(
 #[test]
 fn linuxcnc_violation_checks_plan_within_limits_and_tolerance() {
     let Some(root) = programs_dir() else {
-        eprintln!("skipped: ../shared/conformance/linuxcnc-programs not found");
         return;
     };
     let list = programs(&root, "tp-stress/violation_checks");
@@ -307,7 +312,6 @@ fn linuxcnc_violation_checks_plan_within_limits_and_tolerance() {
 #[ignore = "two minutes in a release build; run on demand"]
 fn every_linuxcnc_program_plans_within_limits_and_tolerance() {
     let Some(root) = programs_dir() else {
-        eprintln!("skipped: ../shared/conformance/linuxcnc-programs not found");
         return;
     };
     let list: Vec<String> = programs(&root, "")
@@ -333,7 +337,6 @@ fn every_linuxcnc_program_plans_within_limits_and_tolerance() {
 #[ignore = "forty seconds in a release build; run on demand"]
 fn linuxcnc_programs_keep_the_parallel_machines_joints_within_limits() {
     let Some(root) = programs_dir() else {
-        eprintln!("skipped: ../shared/conformance/linuxcnc-programs not found");
         return;
     };
     // Programs refused whatever the machine are the nine-axis test's.
