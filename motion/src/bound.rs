@@ -863,7 +863,7 @@ impl<'k> TimeBound<'k> {
 /// cos θ), n2 = (cos θ, sin θ), and its derivative
 /// w′·((D/len)·n1 − c·n2) − w²·((D/len)·n2 + c·n1), w′ = −w·D/(len·r).
 /// (The axial part moves linearly: no third derivative.)
-fn arc_third(a: &Arc, s: f64, len: f64) -> Vec9 {
+pub(crate) fn arc_third(a: &Arc, s: f64, len: f64) -> Vec9 {
     let mut p3 = [0.0; 9];
     if len <= 0.0 {
         return p3;

@@ -30,6 +30,7 @@ pub mod merge;
 pub mod offline;
 pub mod path;
 pub mod plan;
+pub mod schedule;
 #[cfg(test)]
 mod testkit;
 

@@ -848,7 +848,7 @@ impl Blend {
     }
 
     /// The Bézier parameter at arc length `s` (Newton from the table).
-    fn parameter(&self, s: f64) -> f64 {
+    pub(crate) fn parameter(&self, s: f64) -> f64 {
         if s <= 0.0 {
             return 0.0;
         }

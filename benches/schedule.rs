@@ -1,0 +1,136 @@
+//! How close third-order planning could come to the lower bound: for each
+//! program, the executor's cycle time, the time-optimal lower bound of
+//! `kerf_motion::bound` (the figure the `motion` bench divides by) and a
+//! jerk-limited schedule of `kerf_motion::schedule` along the same planned
+//! path. The optimum lies between the bound and the schedule, so
+//! `schedule / bound` is the most a planner that shapes the speed inside
+//! each segment may still have to give away against the bound, and
+//! `executor / schedule` the least such a planner would gain.
+//!
+//! Run: `cargo bench --bench schedule` (about five minutes on this
+//! project's 2-core VM), or with `-- LINES PASSES` for the first LINES
+//! lines of stellabee1.ngc (default 2000) and PASSES linear programs per
+//! stretch (default 6). The whole file would take hours: the schedule
+//! solves a sparse linear program per stretch between stops.
+
+#[path = "programs.rs"]
+mod programs;
+
+use std::time::Instant;
+
+use kerf_interp::{Interpreter, Position};
+use kerf_motion::bound::{lower_bound, BoundConfig};
+use kerf_motion::offline::{self, plan_program, RunConfig};
+use kerf_motion::schedule::{schedule, ScheduleConfig};
+use kerf_motion::{Kinematics, PathMode, PlannerConfig};
+
+fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
+    let planner = PlannerConfig {
+        mode: PathMode::Blend { tolerance: 0.01 },
+        ..PlannerConfig::default()
+    };
+    let run = || Interpreter::from_text(program, name, Position::ZERO);
+    let executor = offline::run(
+        run(),
+        kins,
+        Position::ZERO,
+        RunConfig { planner, record: 0 },
+    )
+    .expect("benchmark programs run")
+    .cycle_time;
+    let segments =
+        plan_program(run(), kins, Position::ZERO, planner, 1).expect("benchmark programs plan");
+    let bound = lower_bound(
+        &segments,
+        kins,
+        BoundConfig {
+            period: planner.period,
+            ..BoundConfig::default()
+        },
+    )
+    .time;
+    let t0 = Instant::now();
+    let config = ScheduleConfig {
+        period: planner.period,
+        passes,
+        ..ScheduleConfig::default()
+    };
+    let found = schedule(&segments, kins, config).expect("mill3 has trivial kinematics");
+    let wall = t0.elapsed().as_secs_f64();
+    let used = found.limit_use(kins).expect("mill3 has trivial kinematics");
+    let time = found.scaled_time(&used);
+    println!(
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {wall:>7.1} s",
+        executor / bound,
+        time / bound,
+        executor / time,
+        used.velocity,
+        used.acceleration,
+        used.jerk,
+        found.v.len(),
+        found.stretches,
+        found.failed,
+    );
+}
+
+fn main() {
+    let numbers: Vec<usize> = std::env::args()
+        .skip(1)
+        .filter_map(|a| a.parse().ok())
+        .collect();
+    let lines = numbers.first().copied().unwrap_or(2000);
+    let passes = numbers.get(1).copied().unwrap_or(6);
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes");
+    println!(
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>9}",
+        "program",
+        "executor",
+        "bound",
+        "schedule",
+        "ex/bd",
+        "sch/bd",
+        "ex/sch",
+        "v",
+        "a",
+        "j",
+        "nodes",
+        "stops",
+        "bad",
+        "solve"
+    );
+    row(
+        "circle R20, 0.05 mm chords",
+        &programs::circle_small_segments(),
+        kins,
+        passes,
+    );
+    row(
+        "zig-zag pocket 60x40",
+        &programs::zigzag_pocket(),
+        kins,
+        passes,
+    );
+    match programs::stellabee() {
+        Some(text) => {
+            let mut head: Vec<&str> = text.lines().take(lines).collect();
+            head.push("M2");
+            row(
+                &format!("stellabee1.ngc, {lines} lines"),
+                &head.join("\n"),
+                kins,
+                passes,
+            );
+        }
+        None => println!("stellabee1.ngc: ../shared/conformance not found, skipped"),
+    }
+    println!();
+    println!(
+        "v a j: largest axis velocity, acceleration and jerk use of the schedule at its nodes"
+    );
+    println!(
+        "(schedule times are slowed by any excess, which the solver's tolerance keeps below 1e-7)"
+    );
+    println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on");
+}

@@ -1,0 +1,725 @@
+//! A jerk-limited speed schedule along the planned path, near the
+//! time-optimal one: the other side of the lower bound in [`crate::bound`].
+//!
+//! Not used by the controller. The bound answers "how fast could any
+//! trajectory along this path go?" with a relaxation, so it may be lower
+//! than anything a machine can follow. This module answers "how fast does
+//! one trajectory go that keeps every axis's velocity, acceleration and
+//! jerk limit?" by finding one. The optimum lies between the two, so
+//! together they tell how much of the executor's gap to the bound
+//! third-order planning could close, and how much is the bound's
+//! looseness.
+//!
+//! Method: time-optimal path parameterisation with jerk limits by
+//! sequential linear programming (as CNC feed-rate scheduling does). The
+//! path is sampled every `ds` of arc length; at each node the unknown is
+//! x = v². With u = ½·dx/ds (the path acceleration) and p′, p″, p‴ the
+//! path's derivatives in arc length, axis i moves at v·p′_i, accelerates
+//! at p′_i·u + p″_i·x and jerks at v·(p′_i·du/ds + 3·p″_i·u + p‴_i·x). The
+//! velocity and acceleration limits are linear in x (u and du/ds are
+//! finite differences of x). The jerk limit reads |p′_i·u′ + 3·p″_i·u +
+//! p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
+//! it, and with the tangent in its place the constraint is linear and
+//! stricter than the true one. Every solution of the linear program is
+//! therefore within the jerk limits (at the nodes), whatever x̄ was;
+//! solving again with x̄ the last solution moves the tangents to where
+//! the schedule is and lets it speed up. The objective is the first-order
+//! change of the cycle time about x̄ (weights ds/x̄^{3/2}), so that the
+//! program spends its freedom where the schedule is slow.
+//!
+//! The jerk constraint at a node holds with the tangent taken at that node
+//! and at both neighbours: otherwise one node dropped to rest would free
+//! its own constraint, a gap in the discretisation that no real motion
+//! has.
+//!
+//! Stops split the path into stretches solved one by one: exact stops,
+//! unblended corners, markers that stand still, program end. At junctions
+//! where the tangent or the curvature jumps the jerk is unbounded in
+//! continuous time; the schedule passes them at the planner's own caps,
+//! v·|Δt_i| ≤ A_i·T and v²·|Δκ_i| ≤ J_i·T (T the servo period).
+//!
+//! What the result is worth. The limits hold exactly at the nodes under
+//! the discretisation above. Between them, and as a 1 ms sampled motion
+//! judged by finite differences as `kerf plan` judges the executor, the
+//! schedule may overshoot a little: [`Schedule::limit_use`] measures that,
+//! and [`Schedule::scaled_time`] slows the whole schedule by the factor
+//! that brings it within every limit (velocity scales as 1/λ, acceleration
+//! 1/λ², jerk 1/λ³). Each linear program finds a local optimum of a
+//! non-convex problem, so the scaled time is an upper estimate of the
+//! optimum, not the optimum itself.
+//!
+//! Cost: a few thousand nodes per second per pass on this project's
+//! machines (a sparse interior-point solve per stretch, `clarabel`):
+//! minutes for a program of a few thousand lines, far too slow to run
+//! ahead of the executor.
+//!
+//! Axes only: joints of non-trivial kinematics are not modelled, and
+//! [`schedule`] refuses machines that have them.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+
+use crate::bound::arc_third;
+use crate::kinematics::Kinematics;
+use crate::path::{Shape, Vec9};
+use crate::plan::{Segment, SegmentKind};
+
+/// Nodes next to a stop whose speed is capped by the ramp out of rest
+/// (see `linear_program`): the geometry there is taken as the stop's.
+const REST_NODES: usize = 8;
+
+/// Settings of the schedule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScheduleConfig {
+    /// Node spacing along the path, mm (at least 4 intervals per segment).
+    pub ds: f64,
+    /// Servo period, s: the planner's caps at curvature jumps and kinks,
+    /// and the sampling of [`Schedule::limit_use`].
+    pub period: f64,
+    /// Linear programs per stretch (the first from a guess, each next one
+    /// linearised about the last solution).
+    pub passes: usize,
+}
+
+impl Default for ScheduleConfig {
+    fn default() -> Self {
+        ScheduleConfig {
+            ds: 0.01,
+            period: 0.001,
+            passes: 6,
+        }
+    }
+}
+
+/// Why no schedule could be made.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ScheduleError {
+    /// A joint that is not an axis of its own: its limits would need the
+    /// kinematics' Jacobian, which the schedule does not model.
+    #[error(
+        "joint {joint} does not drive one axis: schedules model trivial kinematics only; \
+         use the lower bound (kerf_motion::bound) for this machine"
+    )]
+    NonTrivialKinematics { joint: String },
+}
+
+/// Path derivatives in arc length at a node, per axis.
+#[derive(Clone, Copy, Debug, Default)]
+struct Geometry {
+    /// p′ (unit tangent).
+    t: Vec9,
+    /// p″ (curvature vector), 1/mm.
+    c: Vec9,
+    /// p‴, 1/mm².
+    d: Vec9,
+}
+
+/// A sampled point of the path.
+#[derive(Clone, Debug)]
+struct Node {
+    /// Geometry at the end of the interval before (differs from `right`
+    /// only at junctions).
+    left: Geometry,
+    /// Geometry at the start of the interval after.
+    right: Geometry,
+    /// Largest x = v² here, mm²/s².
+    xmax: f64,
+    /// Arc length of the interval to the next node, mm (0 after the last
+    /// node and across the zero-length step out of a stop).
+    h: f64,
+    /// The jerk constraint applies (no tangent or curvature jump here).
+    smooth: bool,
+}
+
+/// A speed schedule along planned segments.
+#[derive(Clone, Debug)]
+pub struct Schedule {
+    /// Cycle time, s, dwells included, as solved (before any scaling).
+    pub time: f64,
+    /// Dwell time in `time`, s.
+    pub dwell: f64,
+    /// Path position of each node, mm.
+    pub s: Vec<f64>,
+    /// Path speed at each node, mm/s.
+    pub v: Vec<f64>,
+    /// Path acceleration at each node, mm/s².
+    pub a: Vec<f64>,
+    /// Stretches between stops.
+    pub stretches: usize,
+    /// Linear programs solved, and those the solver gave up on (the
+    /// stretch keeps its best earlier solution; a stretch with none
+    /// stands still and makes `time` infinite).
+    pub solves: usize,
+    pub failed: usize,
+    nodes: Vec<Node>,
+}
+
+/// Largest use of each kind of limit over every axis, as fractions.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScheduleUse {
+    pub velocity: f64,
+    pub acceleration: f64,
+    pub jerk: f64,
+}
+
+impl ScheduleUse {
+    /// The factor λ ≥ 1 by which slowing the schedule down brings every
+    /// use within 1: max(1, velocity, acceleration^½, jerk^⅓).
+    pub fn slowdown(&self) -> f64 {
+        1f64.max(self.velocity)
+            .max(self.acceleration.sqrt())
+            .max(self.jerk.cbrt())
+    }
+}
+
+/// Axis limits folded from the machine: velocity, acceleration, jerk per
+/// axis, infinite for axes it lacks.
+#[derive(Clone, Copy, Debug)]
+struct AxisLimits {
+    v: Vec9,
+    a: Vec9,
+    j: Vec9,
+}
+
+fn axis_limits(kins: &dyn Kinematics) -> Result<AxisLimits, ScheduleError> {
+    let mut l = AxisLimits {
+        v: [f64::INFINITY; 9],
+        a: [f64::INFINITY; 9],
+        j: [f64::INFINITY; 9],
+    };
+    for spec in kins.axes() {
+        let i = spec.axis.index();
+        l.v[i] = spec.limits.max_velocity;
+        l.a[i] = spec.limits.max_acceleration;
+        l.j[i] = spec.limits.max_jerk;
+    }
+    for (k, spec) in kins.joints().iter().enumerate() {
+        let Some(axis) = kins.joint_axis(k) else {
+            return Err(ScheduleError::NonTrivialKinematics {
+                joint: spec.name.clone(),
+            });
+        };
+        let i = axis.index();
+        l.v[i] = l.v[i].min(spec.limits.max_velocity);
+        l.a[i] = l.a[i].min(spec.limits.max_acceleration);
+        l.j[i] = l.j[i].min(spec.limits.max_jerk);
+    }
+    Ok(l)
+}
+
+/// The schedule along `segments` (markers included, in order) on `kins`.
+pub fn schedule(
+    segments: &[Segment],
+    kins: &dyn Kinematics,
+    config: ScheduleConfig,
+) -> Result<Schedule, ScheduleError> {
+    let limits = axis_limits(kins)?;
+    let mut path = Sampler {
+        limits,
+        config,
+        nodes: Vec::new(),
+        rest: true,
+        dwell: 0.0,
+    };
+    for segment in segments {
+        path.push(segment);
+    }
+    Ok(path.solve())
+}
+
+/// Builds the nodes, then solves.
+struct Sampler {
+    limits: AxisLimits,
+    config: ScheduleConfig,
+    nodes: Vec<Node>,
+    /// The last node must be at rest.
+    rest: bool,
+    dwell: f64,
+}
+
+impl Sampler {
+    /// Largest x the axes' velocity limits and the feed allow at `g`.
+    fn velocity_cap(&self, g: &Geometry, feed: f64) -> f64 {
+        let mut x = feed * feed;
+        for i in 0..9 {
+            if g.t[i] != 0.0 {
+                x = x.min((self.limits.v[i] / g.t[i]).powi(2));
+            }
+        }
+        x
+    }
+
+    fn push(&mut self, segment: &Segment) {
+        if !segment.is_motion() {
+            if let SegmentKind::Dwell { seconds } = segment.kind {
+                self.dwell += seconds.max(0.0);
+            }
+            self.rest = true;
+            if let Some(last) = self.nodes.last_mut() {
+                last.xmax = 0.0;
+            }
+            return;
+        }
+        if segment.length <= 0.0 {
+            return;
+        }
+        let feed = match segment.kind {
+            SegmentKind::Feed => segment.feed,
+            _ => f64::INFINITY,
+        };
+        let len = segment.length;
+        let n = ((len / self.config.ds).ceil() as usize).max(4);
+        let at = |k: usize| len * k as f64 / n as f64;
+        let geometry = |s: f64| -> Geometry {
+            let shape = &segment.shape;
+            let f = shape.frame(s);
+            let d = match shape {
+                Shape::Line(_) => [0.0; 9],
+                Shape::Arc(a) => arc_third(a, s, len),
+                Shape::Blend(b) => {
+                    let d3 = b.third_at_parameter(b.parameter(s));
+                    std::array::from_fn(|i| if i < 3 { d3[i] } else { 0.0 })
+                }
+            };
+            Geometry {
+                t: f.tangent,
+                c: f.curvature,
+                d,
+            }
+        };
+        let first = geometry(0.0);
+        let start_cap = self.velocity_cap(&first, feed);
+        match self.nodes.last_mut() {
+            Some(last) if !self.rest => {
+                // A junction at speed: the planner's caps where the
+                // tangent or the curvature jumps.
+                let before = last.left;
+                let (period, a, j) = (self.config.period, self.limits.a, self.limits.j);
+                let mut x = last.xmax.min(start_cap);
+                let mut smooth = true;
+                for i in 0..9 {
+                    let kink = (first.t[i] - before.t[i]).abs();
+                    if kink > 1e-9 {
+                        x = x.min((a[i] * period / kink).powi(2));
+                        smooth = false;
+                    }
+                    let bend = (first.c[i] - before.c[i]).abs();
+                    if bend > 1e-6 * (1.0 + first.c[i].abs()) {
+                        x = x.min(j[i] * period / bend);
+                        smooth = false;
+                    }
+                }
+                last.right = first;
+                last.xmax = x;
+                last.smooth = smooth;
+            }
+            _ => {
+                // From rest: a node of its own (the step to it from the
+                // last node, if any, has zero length).
+                self.nodes.push(Node {
+                    left: first,
+                    right: first,
+                    xmax: 0.0,
+                    h: 0.0,
+                    smooth: false,
+                });
+            }
+        }
+        for k in 1..=n {
+            let last = self.nodes.last_mut().expect("a node was pushed above");
+            last.h = at(k) - at(k - 1);
+            let g = geometry(at(k));
+            let xmax = self.velocity_cap(&g, feed);
+            self.nodes.push(Node {
+                left: g,
+                right: g,
+                xmax,
+                h: 0.0,
+                smooth: true,
+            });
+        }
+        self.rest = segment.exit_velocity == 0.0;
+        if self.rest {
+            self.nodes.last_mut().expect("pushed above").xmax = 0.0;
+        }
+    }
+
+    fn solve(mut self) -> Schedule {
+        let n = self.nodes.len();
+        let mut out = Schedule {
+            time: self.dwell,
+            dwell: self.dwell,
+            s: Vec::with_capacity(n),
+            v: vec![0.0; n],
+            a: vec![0.0; n],
+            stretches: 0,
+            solves: 0,
+            failed: 0,
+            nodes: Vec::new(),
+        };
+        if n == 0 {
+            return out;
+        }
+        self.nodes[0].xmax = 0.0;
+        self.nodes[n - 1].xmax = 0.0;
+        let mut start = 0;
+        for k in 1..n {
+            if self.nodes[k].xmax > 0.0 {
+                continue;
+            }
+            let stretch = &self.nodes[start..=k];
+            if stretch.iter().any(|node| node.xmax > 0.0) {
+                out.stretches += 1;
+                let x = self.stretch(stretch, &mut out);
+                for (m, &x) in x.iter().enumerate() {
+                    out.v[start + m] = x.max(0.0).sqrt();
+                }
+                // Path acceleration: the mean of the slopes either side
+                // (zero at the stops).
+                let slope = |m: usize| {
+                    let h = stretch[m].h;
+                    if h > 0.0 {
+                        (x[m + 1] - x[m]) / (2.0 * h)
+                    } else {
+                        0.0
+                    }
+                };
+                for m in 1..x.len() - 1 {
+                    out.a[start + m] = 0.5 * (slope(m - 1) + slope(m));
+                }
+            }
+            start = k;
+        }
+        let mut s = 0.0;
+        for k in 0..n {
+            out.s.push(s);
+            s += self.nodes[k].h;
+            if self.nodes[k].h > 0.0 {
+                out.time += interval_time(self.nodes[k].h, out.v[k], out.v[k + 1]);
+            }
+        }
+        out.nodes = self.nodes;
+        out
+    }
+
+    /// x at every node of one stretch (from rest to rest): the best of
+    /// the passes by cycle time.
+    fn stretch(&self, nodes: &[Node], out: &mut Schedule) -> Vec<f64> {
+        let m = nodes.len();
+        let time = |x: &[f64]| -> f64 {
+            (0..m - 1)
+                .filter(|&k| nodes[k].h > 0.0)
+                .map(|k| interval_time(nodes[k].h, x[k].max(0.0).sqrt(), x[k + 1].max(0.0).sqrt()))
+                .sum()
+        };
+        // The first guess: half of what the acceleration limits alone
+        // allow (the jerk-limited schedule is slower; a guess above it
+        // puts the first tangents where they bind hardest).
+        let mut guess = self.second_order(nodes);
+        for x in guess.iter_mut() {
+            *x *= 0.5;
+        }
+        let (mut best, mut best_time) = (vec![0.0; m], f64::INFINITY);
+        for _ in 0..self.config.passes {
+            out.solves += 1;
+            let Some(x) = self.linear_program(nodes, &guess) else {
+                out.failed += 1;
+                break;
+            };
+            let t = time(&x);
+            if t < best_time {
+                best_time = t;
+                best.clone_from(&x);
+            }
+            guess = x;
+        }
+        best
+    }
+
+    /// Forward and backward passes under the acceleration limits alone.
+    fn second_order(&self, nodes: &[Node]) -> Vec<f64> {
+        let mut x: Vec<f64> = nodes.iter().map(|n| n.xmax).collect();
+        let most = |g: &Geometry, x: f64| {
+            let mut u = f64::INFINITY;
+            for i in 0..9 {
+                if g.t[i] != 0.0 {
+                    u = u.min((self.limits.a[i] - (g.c[i] * x).abs()) / g.t[i].abs());
+                }
+            }
+            u.max(0.0)
+        };
+        let m = nodes.len();
+        x[0] = 0.0;
+        x[m - 1] = 0.0;
+        for k in 0..m - 1 {
+            let u = most(&nodes[k].right, x[k]);
+            x[k + 1] = x[k + 1].min(x[k] + 2.0 * u * nodes[k].h);
+        }
+        for k in (0..m - 1).rev() {
+            let u = most(&nodes[k + 1].left, x[k + 1]);
+            x[k] = x[k].min(x[k + 1] + 2.0 * u * nodes[k].h);
+        }
+        x
+    }
+
+    /// One linear program: the velocity, acceleration and (linearised
+    /// about `guess`) jerk limits, the cycle time's first-order change
+    /// about `guess` as objective. `None` when the solver gives up.
+    fn linear_program(&self, nodes: &[Node], guess: &[f64]) -> Option<Vec<f64>> {
+        let m = nodes.len();
+        let (a_max, j_max) = (&self.limits.a, &self.limits.j);
+        let mut rows = Rows::default();
+        for (k, node) in nodes.iter().enumerate() {
+            let top = if k == 0 || k == m - 1 { 0.0 } else { node.xmax };
+            rows.push(&[(k, 1.0)], top.min(1e12));
+            rows.push(&[(k, -1.0)], 0.0);
+        }
+        // Out of rest and into it: the path's jerk s⃛ is at most
+        // J_p = min J_i/|t_i| there (the other terms vanish with v), and
+        // no motion from rest gets further in speed by a distance d than
+        // the one at J_p throughout: v = (J_p/2)·(6d/J_p)^{2/3}, so x ≤
+        // C·d^{4/3}. The jerk rows below cannot see this (the jerk is
+        // v·(…) and v = 0 at the stop), so without it the discretised
+        // schedule would start at full acceleration.
+        let rest_cap = |g: &Geometry| {
+            let jp = (0..9)
+                .filter(|&i| g.t[i] != 0.0)
+                .map(|i| j_max[i] / g.t[i].abs())
+                .fold(f64::INFINITY, f64::min);
+            jp.powf(2.0 / 3.0) * 6f64.powf(4.0 / 3.0) / 4.0
+        };
+        let (c_start, c_end) = (rest_cap(&nodes[0].right), rest_cap(&nodes[m - 1].left));
+        let (mut from_start, mut from_end) = (0.0, 0.0);
+        for k in 1..m - 1 {
+            from_start += nodes[k - 1].h;
+            if k > REST_NODES {
+                break;
+            }
+            if c_start.is_finite() {
+                rows.push(&[(k, 1.0)], c_start * from_start.powf(4.0 / 3.0));
+            }
+        }
+        for k in (1..m - 1).rev() {
+            from_end += nodes[k].h;
+            if m - 1 - k > REST_NODES {
+                break;
+            }
+            if c_end.is_finite() {
+                rows.push(&[(k, 1.0)], c_end * from_end.powf(4.0 / 3.0));
+            }
+        }
+        // Acceleration over each interval, judged at both its ends:
+        // t·(x_{k+1} − x_k)/(2h) + c·x_end.
+        for k in 0..m - 1 {
+            let h = nodes[k].h;
+            if h == 0.0 {
+                continue;
+            }
+            let w = 1.0 / (2.0 * h);
+            for (end, g) in [(k, &nodes[k].right), (k + 1, &nodes[k + 1].left)] {
+                for i in 0..9 {
+                    if g.t[i] == 0.0 && g.c[i] == 0.0 {
+                        continue;
+                    }
+                    for sign in [1.0, -1.0] {
+                        rows.push(
+                            &[
+                                (k, -sign * g.t[i] * w),
+                                (k + 1, sign * g.t[i] * w),
+                                (end, sign * g.c[i]),
+                            ],
+                            a_max[i],
+                        );
+                    }
+                }
+            }
+        }
+        // Jerk at interior nodes: with slopes σ0 = (x_k − x_{k−1})/(2h0)
+        // and σ1 = (x_{k+1} − x_k)/(2h1), u = (σ0 + σ1)/2 and u′ = (σ1 −
+        // σ0)/((h0 + h1)/2); |t·u′ + 3c·u + d·x_k| ≤ J·L(x) with L the
+        // tangent of 1/√x at the guess of each of the three nodes.
+        let top = guess.iter().copied().fold(0.0, f64::max);
+        if top <= 0.0 {
+            return Some(vec![0.0; m]);
+        }
+        let floor = (top * 1e-4).max(1e-9);
+        for k in 1..m - 1 {
+            let (h0, h1) = (nodes[k - 1].h, nodes[k].h);
+            if !nodes[k].smooth || h0 == 0.0 || h1 == 0.0 {
+                continue;
+            }
+            let g = &nodes[k].left;
+            let (w0, w1, wd) = (1.0 / (2.0 * h0), 1.0 / (2.0 * h1), 2.0 / (h0 + h1));
+            for i in 0..9 {
+                if !j_max[i].is_finite() || (g.t[i] == 0.0 && g.c[i] == 0.0 && g.d[i] == 0.0) {
+                    continue;
+                }
+                let (t, c3) = (g.t[i], 1.5 * g.c[i]);
+                let coef = [
+                    t * wd * w0 - c3 * w0,
+                    -t * wd * (w0 + w1) + c3 * (w0 - w1) + g.d[i],
+                    t * wd * w1 + c3 * w1,
+                ];
+                for at in [k - 1, k, k + 1] {
+                    let xb = guess[at].max(floor);
+                    // L(x) = 3/(2√x̄) − x/(2·x̄^{3/2}).
+                    let (l0, l1) = (1.5 / xb.sqrt(), 0.5 / (xb * xb.sqrt()));
+                    for sign in [1.0, -1.0] {
+                        rows.push(
+                            &[
+                                (k - 1, sign * coef[0]),
+                                (k, sign * coef[1]),
+                                (k + 1, sign * coef[2]),
+                                (at, j_max[i] * l1),
+                            ],
+                            j_max[i] * l0,
+                        );
+                    }
+                }
+            }
+        }
+        // Objective: the cycle time's change, −Σ w_k·x_k/(2·x̄^{3/2}) with
+        // w_k the node's share of length; scaled to the fastest node.
+        let objective: Vec<f64> = (0..m)
+            .map(|k| {
+                let before = if k > 0 { nodes[k - 1].h } else { 0.0 };
+                let share = (before + nodes[k].h) / 2.0;
+                -share * (top / guess[k].max(top * 1e-3)).powf(1.5)
+            })
+            .collect();
+        let count = rows.rhs.len();
+        let a = rows.matrix(m);
+        let p = CscMatrix::zeros((m, m));
+        let cones = [SupportedConeT::NonnegativeConeT(count)];
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .build()
+            .expect("the default settings are valid");
+        let mut solver =
+            DefaultSolver::new(&p, &objective, &a, &rows.rhs, &cones, settings).ok()?;
+        solver.solve();
+        match solver.solution.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => {
+                // The stops exactly at rest (the solver leaves them within
+                // its tolerance of it).
+                let mut x: Vec<f64> = solver.solution.x.iter().map(|x| x.max(0.0)).collect();
+                x[0] = 0.0;
+                x[m - 1] = 0.0;
+                Some(x)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Time over an interval of length `h` between speeds `v0` and `v1`:
+/// 2h/(v0 + v1) at constant acceleration, and 3h/v out of rest or into it,
+/// where the ramp at constant jerk has v ∝ s^{2/3}.
+fn interval_time(h: f64, v0: f64, v1: f64) -> f64 {
+    match (v0 > 0.0, v1 > 0.0) {
+        (true, true) => 2.0 * h / (v0 + v1),
+        (false, false) => f64::INFINITY,
+        _ => 3.0 * h / (v0 + v1),
+    }
+}
+
+/// Constraint rows a·x ≤ b, built row by row.
+#[derive(Default)]
+struct Rows {
+    entries: Vec<(usize, usize, f64)>,
+    rhs: Vec<f64>,
+}
+
+impl Rows {
+    fn push(&mut self, terms: &[(usize, f64)], bound: f64) {
+        let row = self.rhs.len();
+        self.entries.extend(
+            terms
+                .iter()
+                .filter(|t| t.1 != 0.0)
+                .map(|&(c, v)| (c, row, v)),
+        );
+        self.rhs.push(bound);
+    }
+
+    /// Compressed columns, duplicate entries summed.
+    fn matrix(&mut self, columns: usize) -> CscMatrix<f64> {
+        self.entries.sort_unstable_by_key(|&(c, r, _)| (c, r));
+        let mut colptr = vec![0; columns + 1];
+        let (mut rowval, mut nzval): (Vec<usize>, Vec<f64>) = (Vec::new(), Vec::new());
+        let mut last = None;
+        for &(c, r, v) in &self.entries {
+            if last == Some((c, r)) {
+                *nzval.last_mut().expect("an entry was pushed") += v;
+                continue;
+            }
+            last = Some((c, r));
+            rowval.push(r);
+            nzval.push(v);
+            colptr[c + 1] = rowval.len();
+        }
+        for c in 1..=columns {
+            colptr[c] = colptr[c].max(colptr[c - 1]);
+        }
+        CscMatrix::new(self.rhs.len(), columns, colptr, rowval, nzval)
+    }
+}
+
+impl Schedule {
+    /// Motion time (without dwells), s.
+    fn motion_time(&self) -> f64 {
+        self.time - self.dwell
+    }
+
+    /// The cycle time slowed by `use_.slowdown()`: the schedule within
+    /// every limit as measured by `use_`.
+    pub fn scaled_time(&self, use_: &ScheduleUse) -> f64 {
+        self.motion_time() * use_.slowdown() + self.dwell
+    }
+
+    /// Largest axis velocity, acceleration and jerk use at the nodes, with
+    /// the exact speed √x where the linear programs used its tangent. The
+    /// jerk is not judged on the nodes next to a stop, where its finite
+    /// differences are singular (v → 0) and the ramp cap holds instead.
+    pub fn limit_use(&self, kins: &dyn Kinematics) -> Result<ScheduleUse, ScheduleError> {
+        let limits = axis_limits(kins)?;
+        let nodes = &self.nodes;
+        let x: Vec<f64> = self.v.iter().map(|v| v * v).collect();
+        let mut use_ = ScheduleUse::default();
+        let slope = |k: usize| (x[k + 1] - x[k]) / (2.0 * nodes[k].h);
+        for k in 0..nodes.len() {
+            for g in [&nodes[k].left, &nodes[k].right] {
+                for i in 0..9 {
+                    use_.velocity = use_.velocity.max(self.v[k] * g.t[i].abs() / limits.v[i]);
+                }
+            }
+            if k + 1 == nodes.len() || nodes[k].h == 0.0 {
+                continue;
+            }
+            let u = slope(k);
+            for (end, g) in [(k, &nodes[k].right), (k + 1, &nodes[k + 1].left)] {
+                for i in 0..9 {
+                    let a = g.t[i] * u + g.c[i] * x[end];
+                    use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
+                }
+            }
+            if k == 0 || !nodes[k].smooth || nodes[k - 1].h == 0.0 {
+                continue;
+            }
+            if x[k - 1] == 0.0 || x[k + 1] == 0.0 {
+                continue;
+            }
+            let (h0, h1) = (nodes[k - 1].h, nodes[k].h);
+            let (s0, s1) = (slope(k - 1), u);
+            let (um, du) = (0.5 * (s0 + s1), (s1 - s0) * 2.0 / (h0 + h1));
+            let g = &nodes[k].left;
+            for i in 0..9 {
+                let j = self.v[k] * (g.t[i] * du + 3.0 * g.c[i] * um + g.d[i] * x[k]);
+                use_.jerk = use_.jerk.max(j.abs() / limits.j[i]);
+            }
+        }
+        Ok(use_)
+    }
+}

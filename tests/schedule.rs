@@ -1,0 +1,155 @@
+//! The jerk-limited schedule (`kerf_motion::schedule`) against the closed
+//! form of the S-curve and against the lower bound it sits above.
+
+use kerf_interp::{Interpreter, Position};
+use kerf_motion::bound::{lower_bound, BoundConfig};
+use kerf_motion::offline::plan_program;
+use kerf_motion::schedule::{schedule, Schedule, ScheduleConfig, ScheduleError};
+use kerf_motion::{Kinematics, PathMode, PlannerConfig, Segment};
+
+fn planned(program: &str, kins: &dyn Kinematics, start: Position) -> Vec<Segment> {
+    let config = PlannerConfig {
+        mode: PathMode::Blend { tolerance: 0.01 },
+        ..PlannerConfig::default()
+    };
+    plan_program(
+        Interpreter::from_text(program, "t.ngc", start),
+        kins,
+        start,
+        config,
+        1,
+    )
+    .unwrap()
+}
+
+/// Coarser than the default, to keep the debug build quick.
+fn config() -> ScheduleConfig {
+    ScheduleConfig {
+        ds: 0.02,
+        ..ScheduleConfig::default()
+    }
+}
+
+/// The time-optimal rest-to-rest motion over `len` under speed `v`,
+/// acceleration `a` and jerk `j` (the seven-phase S-curve): accelerate to
+/// a peak speed w and straight back, cruising at v only if the length
+/// leaves room. Ramping 0 → w takes w/a + a/j where the acceleration
+/// reaches a (w ≥ a²/j), 2·√(w/j) where it does not, and covers w times
+/// half that.
+fn s_curve_time(len: f64, v: f64, a: f64, j: f64) -> f64 {
+    let ramp = |w: f64| {
+        if w >= a * a / j {
+            w / a + a / j
+        } else {
+            2.0 * (w / j).sqrt()
+        }
+    };
+    if v * ramp(v) <= len {
+        return 2.0 * ramp(v) + (len - v * ramp(v)) / v;
+    }
+    // Both ramps, no cruise: the peak speed w with w·ramp(w) = len.
+    let (mut lo, mut hi) = (0.0, v);
+    for _ in 0..200 {
+        let w = 0.5 * (lo + hi);
+        if w * ramp(w) > len {
+            hi = w;
+        } else {
+            lo = w;
+        }
+    }
+    2.0 * ramp(lo)
+}
+
+fn solved(program: &str, kins: &dyn Kinematics, start: Position) -> (Vec<Segment>, Schedule) {
+    let segments = planned(program, kins, start);
+    let schedule = schedule(&segments, kins, config()).unwrap();
+    assert_eq!(schedule.failed, 0, "every linear program solved");
+    (segments, schedule)
+}
+
+/// On a line the S-curve is the time-optimal jerk-limited motion, so the
+/// schedule (a feasible motion) cannot be quicker, and its discretisation
+/// should leave it within a few per cent. Lengths where the acceleration
+/// limit is never reached, where it is but the feed is not, and where
+/// the feed is cruised at.
+#[test]
+fn a_line_from_rest_to_rest_takes_the_s_curve_time() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    // mill3's X: 150 mm/s, 1500 mm/s², 75,000 mm/s³; F6000 is 100 mm/s.
+    for len in [0.5, 3.0, 12.0] {
+        let program = format!("G21 G90 G1 F6000 X{}\nM2\n", 10.0 + len);
+        let (segments, schedule) = solved(&program, kins, start);
+        let exact = s_curve_time(len, 100.0, 1500.0, 75_000.0);
+        let ratio = schedule.time / exact;
+        assert!(
+            (0.995..1.03).contains(&ratio),
+            "{len} mm: schedule {:.5} s against the S-curve's {exact:.5} s ({ratio:.4})",
+            schedule.time
+        );
+        eprintln!(
+            "{len} mm: schedule {:.5} s, S-curve {exact:.5} s ({ratio:.4})",
+            schedule.time
+        );
+        let used = schedule.limit_use(kins).unwrap();
+        assert!(used.slowdown() <= 1.0 + 1e-6, "{len} mm: {used:?}");
+        assert!(segments.len() >= 2);
+    }
+}
+
+/// The bound is a lower bound on every motion within the limits, the
+/// schedule is one such motion: corners, arcs and a dense curve, with
+/// stops and blends.
+#[test]
+fn the_schedule_is_no_quicker_than_the_lower_bound() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -10.0);
+    let mut program =
+        String::from("G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\n");
+    for k in 1..=60 {
+        let a = k as f64 * 0.02;
+        program += &format!(
+            "X{:.5} Y{:.5}\n",
+            64.0 - 8.0 * (1.0 - a.cos()),
+            60.0 + 8.0 * a.sin()
+        );
+    }
+    program += "G61 G1 X50 Y50\nM2\n";
+    let (segments, schedule) = solved(&program, kins, start);
+    let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
+    eprintln!("schedule {:.5} s, bound {bound:.5} s", schedule.time);
+    assert!(
+        schedule.time >= bound,
+        "schedule {:.5} s below the lower bound {bound:.5} s",
+        schedule.time
+    );
+    // Not far above it either: the program has room to speed up and slow
+    // down, which a schedule stuck at its first guess would not use.
+    assert!(
+        schedule.time <= 1.5 * bound,
+        "schedule {:.5} s, bound {bound:.5} s",
+        schedule.time
+    );
+    let used = schedule.limit_use(kins).unwrap();
+    assert!(used.slowdown() <= 1.0 + 1e-6, "{used:?}");
+    assert!(
+        used.acceleration > 0.99 && used.jerk > 0.99,
+        "limits reached: {used:?}"
+    );
+}
+
+/// A parallel machine's joints are not modelled: refused by name, not
+/// scheduled as if they were axes.
+#[test]
+fn a_machine_with_parallel_kinematics_is_refused() {
+    let machine = kerf_machines::load("oxglide-x").unwrap();
+    let kins = &*machine.kinematics;
+    let err = schedule(&[], kins, config()).unwrap_err();
+    assert!(
+        matches!(err, ScheduleError::NonTrivialKinematics { .. }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("trivial kinematics"), "{err}");
+}
