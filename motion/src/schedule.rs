@@ -70,6 +70,9 @@ use crate::plan::{Segment, SegmentKind};
 /// (see `linear_program`): the geometry there is taken as the stop's.
 const REST_NODES: usize = 8;
 
+/// Lower first guesses tried when the solver gives up on the first pass.
+const RETRIES: usize = 3;
+
 /// Settings of the schedule.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScheduleConfig {
@@ -422,12 +425,25 @@ impl Sampler {
             *x *= 0.5;
         }
         let (mut best, mut best_time) = (vec![0.0; m], f64::INFINITY);
-        for _ in 0..self.config.passes {
+        let mut retries = 0;
+        let mut pass = 0;
+        while pass < self.config.passes {
             out.solves += 1;
             let Some(x) = self.linear_program(nodes, &guess) else {
                 out.failed += 1;
-                break;
+                // The solver gave up (numerically): from a lower guess,
+                // whose tangents are steeper, while nothing was found;
+                // else keep the best found.
+                if best_time.is_finite() || retries == RETRIES {
+                    break;
+                }
+                retries += 1;
+                for x in guess.iter_mut() {
+                    *x *= 0.25;
+                }
+                continue;
             };
+            pass += 1;
             let t = time(&x);
             if t < best_time {
                 best_time = t;
