@@ -5,7 +5,11 @@
 //! divides by).
 //!
 //! Run: `cargo bench --bench loss` (about 25 s), or
-//! `cargo bench --bench loss -- 30000` for the first 30,000 lines.
+//! `cargo bench --bench loss -- 30000` for the first 30,000 lines. With
+//! `--schedule` (and a number of lines: about 35 s per 1000) it also sets
+//! beside them the jerk-limited schedule of `kerf_motion::schedule`, a
+//! motion within every limit: where the executor loses against the
+//! schedule is where a better planner would gain, not only the bound.
 //!
 //! Each servo period counts for the segment at the front of the queue
 //! when it starts; each step of the bound for the segment its middle lies
@@ -23,6 +27,7 @@ use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::plan_program;
 use kerf_motion::path::Shape;
+use kerf_motion::schedule::{schedule, ScheduleConfig};
 use kerf_motion::{Executor, PlannerConfig, Segment};
 
 /// What a segment is, for the table.
@@ -47,6 +52,11 @@ fn kind(segments: &[Segment], k: usize) -> &'static str {
 
 fn main() {
     let lines: Option<usize> = std::env::args().skip(1).find_map(|a| a.parse().ok());
+    let with_schedule = std::env::args().any(|a| a == "--schedule");
+    if with_schedule && lines.is_none() {
+        println!("--schedule needs a number of lines: the whole file would take hours");
+        return;
+    }
     let Some(text) = programs::stellabee() else {
         println!("stellabee1.ngc: not found under ../shared/conformance; skipped");
         return;
@@ -88,15 +98,25 @@ fn main() {
             at += s.length;
         }
     }
-    let mut bound = vec![0.0; segments.len()];
-    let mut k = 0;
-    for w in 0..profile.step.len().saturating_sub(1) {
-        let middle = (profile.s[w] + profile.s[w + 1]) / 2.0;
-        while k + 1 < segments.len() && starts[k + 1] <= middle {
-            k += 1;
+    // Each step's time to the segment its middle lies on.
+    let by_segment = |s: &[f64], step: &[f64]| {
+        let mut out = vec![0.0; segments.len()];
+        let mut k = 0;
+        for w in 0..step.len().saturating_sub(1) {
+            let middle = (s[w] + s[w + 1]) / 2.0;
+            while k + 1 < segments.len() && starts[k + 1] <= middle {
+                k += 1;
+            }
+            out[k] += step[w];
         }
-        bound[k] += profile.step[w];
-    }
+        out
+    };
+    let bound = by_segment(&profile.s, &profile.step);
+    let scheduled = with_schedule.then(|| {
+        let found = schedule(&segments, kins, ScheduleConfig::default())
+            .expect("mill3 has trivial kinematics");
+        (found.time, by_segment(&found.s, &found.step))
+    });
 
     println!(
         "stellabee1.ngc{} on mill3, G64 P0.01: {} segments, run {cycle:.3} s, bound {:.3} s, ratio {:.3}",
@@ -105,13 +125,20 @@ fn main() {
         profile.time,
         cycle / profile.time,
     );
+    if let Some((time, _)) = &scheduled {
+        println!(
+            "jerk-limited schedule {time:.3} s: run / schedule {:.3}, schedule / bound {:.3}",
+            cycle / time,
+            time / profile.time
+        );
+    }
     println!();
     println!(
-        "{:<20} {:>8} {:>11} {:>11} {:>7} {:>11} {:>11}",
-        "segment", "count", "run s", "bound s", "ratio", "lost s", "at limit s"
+        "{:<20} {:>8} {:>11} {:>11} {:>7} {:>11} {:>11} {:>11}",
+        "segment", "count", "run s", "bound s", "ratio", "lost s", "at limit s", "schedule s"
     );
-    // count, run, bound, at its speed limit throughout
-    let mut kinds: BTreeMap<&str, (usize, f64, f64, f64)> = BTreeMap::new();
+    // count, run, bound, at its speed limit throughout, schedule
+    let mut kinds: BTreeMap<&str, (usize, f64, f64, f64, f64)> = BTreeMap::new();
     for (k, s) in segments.iter().enumerate() {
         let row = kinds.entry(kind(&segments, k)).or_default();
         row.0 += 1;
@@ -120,15 +147,22 @@ fn main() {
         if s.is_motion() {
             row.3 += s.length / s.max_velocity.min(s.feed);
         }
+        if let Some((_, steps)) = &scheduled {
+            row.4 += steps[k];
+        }
     }
-    for (name, (count, run, bound, at_limit)) in &kinds {
+    for (name, (count, run, bound, at_limit, scheduled_time)) in &kinds {
         let ratio = if *bound > 0.0 {
             format!("{:.3}", run / bound)
         } else {
             "-".to_string()
         };
+        let scheduled_time = match scheduled {
+            Some(_) => format!("{scheduled_time:.3}"),
+            None => "-".to_string(),
+        };
         println!(
-            "{name:<20} {count:>8} {run:>11.3} {bound:>11.3} {ratio:>7} {:>11.3} {at_limit:>11.3}",
+            "{name:<20} {count:>8} {run:>11.3} {bound:>11.3} {ratio:>7} {:>11.3} {at_limit:>11.3} {scheduled_time:>11}",
             run - bound,
         );
     }

@@ -149,6 +149,10 @@ pub struct Schedule {
     pub v: Vec<f64>,
     /// Path acceleration at each node, mm/s².
     pub a: Vec<f64>,
+    /// Time from each node to the next, s (0 after the last and across
+    /// the zero-length steps out of stops), summing to `time` less the
+    /// dwells: where along the path the schedule spends its time.
+    pub step: Vec<f64>,
     /// Stretches between stops.
     pub stretches: usize,
     /// Linear programs solved, and those the solver gave up on (the
@@ -357,6 +361,7 @@ impl Sampler {
             s: Vec::with_capacity(n),
             v: vec![0.0; n],
             a: vec![0.0; n],
+            step: vec![0.0; n],
             stretches: 0,
             solves: 0,
             failed: 0,
@@ -400,7 +405,8 @@ impl Sampler {
             out.s.push(s);
             s += self.nodes[k].h;
             if self.nodes[k].h > 0.0 {
-                out.time += interval_time(self.nodes[k].h, out.v[k], out.v[k + 1]);
+                out.step[k] = interval_time(self.nodes[k].h, out.v[k], out.v[k + 1]);
+                out.time += out.step[k];
             }
         }
         out.nodes = self.nodes;
