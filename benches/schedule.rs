@@ -129,8 +129,6 @@ fn main() {
     println!(
         "v a j: largest axis velocity, acceleration and jerk use of the schedule at its nodes"
     );
-    println!(
-        "(schedule times are slowed by any excess, which the solver's tolerance keeps below 1e-7)"
-    );
+    println!("(schedule times are slowed by any excess, the solver's tolerance, up to 1e-5)");
     println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on");
 }
