@@ -28,7 +28,8 @@ fn planned(program: &str, kins: &dyn Kinematics, start: Position) -> Vec<Segment
 /// (`Schedule::scaled_time` takes that off).
 const SOLVER_TOLERANCE: f64 = 1e-4;
 
-/// Coarser than the default, to keep the debug build quick.
+/// Coarser than the default, to keep the debug build quick (clarabel's
+/// generic solver is instantiated, unoptimised, in the test build).
 fn config() -> ScheduleConfig {
     ScheduleConfig {
         ds: 0.02,
@@ -67,8 +68,17 @@ fn s_curve_time(len: f64, v: f64, a: f64, j: f64) -> f64 {
 }
 
 fn solved(program: &str, kins: &dyn Kinematics, start: Position) -> (Vec<Segment>, Schedule) {
+    solved_with(program, kins, start, config())
+}
+
+fn solved_with(
+    program: &str,
+    kins: &dyn Kinematics,
+    start: Position,
+    config: ScheduleConfig,
+) -> (Vec<Segment>, Schedule) {
     let segments = planned(program, kins, start);
-    let schedule = schedule(&segments, kins, config()).unwrap();
+    let schedule = schedule(&segments, kins, config).unwrap();
     assert_eq!(schedule.failed, 0, "every linear program solved");
     (segments, schedule)
 }
@@ -176,7 +186,14 @@ fn arcs_in_every_plane_and_a_dwell() {
                  G18 G3 X65 Z-14 I0 K5\n\
                  G19 G2 Y60 Z-9 J5 K0\n\
                  G0 X50 Y50 Z-20\n";
-    let (segments, still) = solved(&format!("{moves}M2\n"), kins, start);
+    // Coarser still: clarabel's generic code is compiled in this crate,
+    // unoptimised in the test build, and these moves are long.
+    let coarse = ScheduleConfig {
+        ds: 0.05,
+        passes: 3,
+        ..ScheduleConfig::default()
+    };
+    let (segments, still) = solved_with(&format!("{moves}M2\n"), kins, start, coarse);
     let used = still.limit_use(kins).unwrap();
     assert!(used.slowdown() <= 1.0 + SOLVER_TOLERANCE, "{used:?}");
     let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
@@ -187,7 +204,7 @@ fn arcs_in_every_plane_and_a_dwell() {
     );
 
     let dwelling = moves.replacen("G0 X50", "G4 P0.5\nG0 X50", 1);
-    let (_, dwelt) = solved(&format!("{dwelling}M2\n"), kins, start);
+    let (_, dwelt) = solved_with(&format!("{dwelling}M2\n"), kins, start, coarse);
     assert!(
         (dwelt.time - still.time - 0.5).abs() < 1e-9,
         "with a 0.5 s dwell {:.6} s, without {:.6} s",
