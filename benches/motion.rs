@@ -19,7 +19,9 @@
 //! none is quicker: it is a lower bound. "Independent" means independent
 //! of the executor's online velocity profile, which is what the ratio
 //! judges; the path itself is the planner's (blend shapes included), so the
-//! ratio does not judge how the blends use the path tolerance.
+//! ratio does not judge how the blends use the path tolerance. The bound
+//! is a relaxation: `cargo bench --bench schedule` sets a motion that
+//! keeps every limit beside it, so the optimum is known to lie between.
 //!
 //! The second bound ("poly") is the older estimate on the *programmed*
 //! polyline (straight moves only, so not shown for programs with arcs): a
