@@ -38,20 +38,22 @@
 //! continuous time; the schedule passes them at the planner's own caps,
 //! v·|Δt_i| ≤ A_i·T and v²·|Δκ_i| ≤ J_i·T (T the servo period).
 //!
-//! What the result is worth. The limits hold exactly at the nodes under
-//! the discretisation above. Between them, and as a 1 ms sampled motion
-//! judged by finite differences as `kerf plan` judges the executor, the
-//! schedule may overshoot a little: [`Schedule::limit_use`] measures that,
-//! and [`Schedule::scaled_time`] slows the whole schedule by the factor
-//! that brings it within every limit (velocity scales as 1/λ, acceleration
-//! 1/λ², jerk 1/λ³). Each linear program finds a local optimum of a
-//! non-convex problem, so the scaled time is an upper estimate of the
-//! optimum, not the optimum itself.
+//! What the result is worth. The limits hold at the nodes under the
+//! discretisation above, to the solver's tolerance (up to about 1e-5 where
+//! it reports reduced accuracy): [`Schedule::limit_use`] measures them
+//! there with the exact √x, and [`Schedule::scaled_time`] slows the whole
+//! schedule by the factor that brings it within every limit (velocity
+//! scales as 1/λ, acceleration 1/λ², jerk 1/λ³). The limits are not judged
+//! between nodes, nor on a 1 ms sampled motion as `kerf plan` judges the
+//! executor. Each linear program finds a local optimum of a non-convex
+//! problem, so the scaled time is an upper estimate of the optimum, not
+//! the optimum itself.
 //!
-//! Cost: a few thousand nodes per second per pass on this project's
-//! machines (a sparse interior-point solve per stretch, `clarabel`):
-//! minutes for a program of a few thousand lines, far too slow to run
-//! ahead of the executor.
+//! Cost: 380–2100 nodes a second at six passes on this project's 2-core
+//! VM (a sparse interior-point solve per stretch and pass, `clarabel`;
+//! fewest on one long stretch): minutes for a program of a few thousand
+//! lines, as slow as the motion itself, far too slow to run ahead of the
+//! executor.
 //!
 //! Axes only: joints of non-trivial kinematics are not modelled, and
 //! [`schedule`] refuses machines that have them.
@@ -78,8 +80,7 @@ const RETRIES: usize = 3;
 pub struct ScheduleConfig {
     /// Node spacing along the path, mm (at least 4 intervals per segment).
     pub ds: f64,
-    /// Servo period, s: the planner's caps at curvature jumps and kinks,
-    /// and the sampling of [`Schedule::limit_use`].
+    /// Servo period, s: the planner's caps at curvature jumps and kinks.
     pub period: f64,
     /// Linear programs per stretch (the first from a guess, each next one
     /// linearised about the last solution).
@@ -147,8 +148,6 @@ pub struct Schedule {
     pub s: Vec<f64>,
     /// Path speed at each node, mm/s.
     pub v: Vec<f64>,
-    /// Path acceleration at each node, mm/s².
-    pub a: Vec<f64>,
     /// Time from each node to the next, s (0 after the last and across
     /// the zero-length steps out of stops), summing to `time` less the
     /// dwells: where along the path the schedule spends its time.
@@ -163,11 +162,15 @@ pub struct Schedule {
     nodes: Vec<Node>,
 }
 
-/// Largest use of each kind of limit over every axis, as fractions.
+/// Largest use of each kind of limit over every axis, as fractions of the
+/// limit (1 = at the limit).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ScheduleUse {
+    /// Axis speed over its velocity limit.
     pub velocity: f64,
+    /// Axis acceleration over its acceleration limit.
     pub acceleration: f64,
+    /// Axis jerk over its jerk limit.
     pub jerk: f64,
 }
 
@@ -360,7 +363,6 @@ impl Sampler {
             dwell: self.dwell,
             s: Vec::with_capacity(n),
             v: vec![0.0; n],
-            a: vec![0.0; n],
             step: vec![0.0; n],
             stretches: 0,
             solves: 0,
@@ -383,19 +385,6 @@ impl Sampler {
                 let x = self.stretch(stretch, &mut out);
                 for (m, &x) in x.iter().enumerate() {
                     out.v[start + m] = x.max(0.0).sqrt();
-                }
-                // Path acceleration: the mean of the slopes either side
-                // (zero at the stops).
-                let slope = |m: usize| {
-                    let h = stretch[m].h;
-                    if h > 0.0 {
-                        (x[m + 1] - x[m]) / (2.0 * h)
-                    } else {
-                        0.0
-                    }
-                };
-                for m in 1..x.len() - 1 {
-                    out.a[start + m] = 0.5 * (slope(m - 1) + slope(m));
                 }
             }
             start = k;
