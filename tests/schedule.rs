@@ -96,7 +96,7 @@ fn a_line_from_rest_to_rest_takes_the_s_curve_time() {
     // mill3's X: 150 mm/s, 1500 mm/s², 75,000 mm/s³; F6000 is 100 mm/s.
     for len in [0.5, 3.0, 12.0] {
         let program = format!("G21 G90 G1 F6000 X{}\nM2\n", 10.0 + len);
-        let (segments, schedule) = solved(&program, kins, start);
+        let (_, schedule) = solved(&program, kins, start);
         let exact = s_curve_time(len, 100.0, 1500.0, 75_000.0);
         let ratio = schedule.time / exact;
         assert!(
@@ -113,7 +113,6 @@ fn a_line_from_rest_to_rest_takes_the_s_curve_time() {
             used.slowdown() <= 1.0 + SOLVER_TOLERANCE,
             "{len} mm: {used:?}"
         );
-        assert!(segments.len() >= 2);
     }
 }
 
