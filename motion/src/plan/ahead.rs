@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 
 use super::{
     blend_legs, blend_near, corner_legs, fitted_frame, frame_on, hairpin, xyz_frame, Chord,
-    FrameXyz, PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
+    FittedPoints, FrameXyz, PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -621,6 +621,8 @@ struct Worker {
     consumed: u64,
     /// The last fitted frame worked out, with its move's index.
     last_fit: Option<(u64, Option<Frame>)>,
+    /// The fitted points its frames take differences of.
+    points: FittedPoints,
     /// Where the last blend worked out that took b's whole first half
     /// ended (X Y Z, at b's midpoint: the fit's frame or the fallback's on
     /// a dense curve, on b with no curvature before a hairpin), with its
@@ -654,6 +656,7 @@ impl Worker {
             last_break: None,
             consumed: 0,
             last_fit: None,
+            points: FittedPoints::new(),
             ended: None,
             legs_seen: None,
             judge_at: SHARE_PERIOD,
@@ -813,6 +816,7 @@ impl Worker {
     /// (Fields one by one, so that a slot can be borrowed meanwhile.)
     fn fit(
         last_fit: &mut Option<(u64, Option<Frame>)>,
+        points: &mut FittedPoints,
         moves: &VecDeque<Move>,
         chords: &VecDeque<Chord>,
         first: u64,
@@ -832,6 +836,8 @@ impl Worker {
             (index - first) as usize,
             (end - first) as usize,
             line,
+            first,
+            points,
         );
         *last_fit = Some((index, fit));
         fit
@@ -892,7 +898,15 @@ impl Worker {
             // trimmed line starts. (Had the planner decided a's blend
             // seeing other moves, or with another frame, the start differs
             // and it works this one out itself.)
-            let fit_a = Self::fit(&mut self.last_fit, moves, chords, first, j - 1, end);
+            let fit_a = Self::fit(
+                &mut self.last_fit,
+                &mut self.points,
+                moves,
+                chords,
+                first,
+                j - 1,
+                end,
+            );
             if !self.shared.takes(j - 1) {
                 // Junction j − 1 is the planner's: it needs this fit too.
                 let fit = (window_end(j - 1, end), fit_a.as_ref().map(xyz_frame));
@@ -930,6 +944,7 @@ impl Worker {
             _ => None,
         };
         let last_fit = &mut self.last_fit;
+        let points = &mut self.points;
         let mut ended = None;
         // Worked out in its slot: copying a speculation in showed in
         // profiles.
@@ -946,7 +961,7 @@ impl Worker {
                 sampled: None,
             });
             if let Some((c, tol_c, legs_bc)) = dense {
-                let fit = Self::fit(last_fit, moves, chords, first, j, end);
+                let fit = Self::fit(last_fit, points, moves, chords, first, j, end);
                 let mut bc = None;
                 if let Some(mid) = &fit {
                     let (control, near) = blend_near(a, b, tolerance, legs, &start, mid);
