@@ -917,11 +917,19 @@ fn fitted_point(chords: &VecDeque<Chord>, at: usize, end: usize) -> Option<[f64;
         return None;
     }
     let mut window = FitWindow::gather(chords, at, side);
-    // A fixed reach where the window spans most of FIT_REACH: the weights
-    // then fall to zero where a chord leaves the window, and the points at
-    // neighbouring midpoints lie on one smooth curve. (A reach that
-    // follows the window's extent moves with every chord's rounding.)
-    window.reach = (1.25 * window.extent()).min(FIT_REACH);
+    // The weights should fall to zero where a chord leaves the window, so
+    // that the points at neighbouring midpoints lie on one smooth curve,
+    // and the reach should not move with every chord's rounding. Where
+    // the window spans most of FIT_REACH, FIT_REACH itself; where short
+    // chords fill POINT_SIDE well within it, half a chord past the
+    // outermost midpoint; elsewhere (corners, turns) as the fit's own.
+    let extent = window.extent();
+    let snug = extent * (2 * side + 2) as f64 / (2 * side + 1) as f64;
+    window.reach = if side == POINT_SIDE && snug < 0.8 * FIT_REACH {
+        snug
+    } else {
+        (1.25 * extent).min(FIT_REACH)
+    };
     let coef = window.solve()?;
     Some(std::array::from_fn(|i| coef[0][i] + centre.midpoint[i]))
 }
@@ -3763,9 +3771,9 @@ mod tests {
     /// Cycle time, deviation and limit use of two turns of a circle of
     /// radius 5 mm in 0.02 mm chords at F3000, coordinates rounded to
     /// `decimals`, on a machine with mill3's limits.
-    fn rounded_circle(decimals: usize) -> (f64, f64, f64, f64) {
+    fn rounded_circle(decimals: usize, chord: f64) -> (f64, f64, f64, f64) {
         let r = 5.0;
-        let n = (2.0 * std::f64::consts::PI * r / 0.02).round() as usize;
+        let n = (2.0 * std::f64::consts::PI * r / chord).round() as usize;
         // Centred on X−3 so that it starts where the machine is.
         // No G64 P: with P alone the collinear merge (Q = P) would take
         // the chords first. The default tolerance is 0.01 mm.
@@ -3787,7 +3795,7 @@ mod tests {
             },
         )
         .unwrap();
-        let length = 2.0 * n as f64 * 0.02;
+        let length = 2.0 * n as f64 * chord;
         (
             report.cycle_time,
             length,
@@ -3804,7 +3812,7 @@ mod tests {
         // and to rest, each losing at most its duration: on a curve the
         // planner leaves the tangent half of A and a quarter of J (the
         // default shares), so v/a + a/j = 0.067 + 0.04 s.
-        let (exact, length, _, _) = rounded_circle(9);
+        let (exact, length, _, _) = rounded_circle(9, 0.02);
         let feed_time = length / 50.0;
         let ramp = 50.0 / 750.0 + 750.0 / 18_750.0;
         assert!(
@@ -3822,10 +3830,26 @@ mod tests {
         // differenced from the fitted points ([`differenced_frame`]),
         // 1.02, 1.03 and 1.63 times.
         for (decimals, within) in [(5, 1.05), (4, 1.08), (3, 2.0)] {
-            let (time, _, deviation, use_) = rounded_circle(decimals);
+            let (time, _, deviation, use_) = rounded_circle(decimals, 0.02);
             assert!(
                 time < exact * within,
                 "{decimals} decimals: {time} s against {exact} s for the exact circle"
+            );
+            assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
+            assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
+        }
+        // Chords of 0.01 mm fill the fit's 23 lines each side within
+        // 0.23 mm, well inside its reach; the reach then sits half a chord
+        // past the outermost midpoint. Rounded to 1e-5 and 1e-4 mm they
+        // run 1.007 and 1.45 times the exact circle's time (1.19 and 2.37
+        // with the reach at 1.25 times the window's extent, which moves
+        // with the rounding).
+        let (exact, _, _, _) = rounded_circle(9, 0.01);
+        for (decimals, within) in [(5, 1.03), (4, 1.6)] {
+            let (time, _, deviation, use_) = rounded_circle(decimals, 0.01);
+            assert!(
+                time < exact * within,
+                "0.01 mm chords, {decimals} decimals: {time} s against {exact} s"
             );
             assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
             assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
