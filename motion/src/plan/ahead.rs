@@ -37,7 +37,7 @@ use crate::path::{Blend, BlendExtremes, Frame};
 
 /// How many more lines the planner holds back while the worker runs, so
 /// that the worker has them before the planner needs their blends.
-pub(super) const LEAD: usize = 128;
+pub(super) const LEAD: usize = 102;
 
 /// Moves handed over at once (one lock per batch, not per move).
 const BATCH: usize = 16;
