@@ -912,13 +912,18 @@ const POINT_SIDE: usize = FIT_SIDE - 1;
 /// The point at the midpoint of `chords[at]` on the curve fitted through
 /// it and its neighbours ([`FitWindow::point`]), seeing chords before
 /// `end`.
-fn fitted_point(chords: &VecDeque<Chord>, at: usize, end: usize) -> Option<[f64; 3]> {
+fn fitted_point(
+    chords: &VecDeque<Chord>,
+    at: usize,
+    end: usize,
+    window: &mut FitWindow,
+) -> Option<[f64; 3]> {
     let centre = &chords[at];
     let side = fit_side(chords, at, end, POINT_SIDE);
     if side < FIT_MIN_SIDE {
         return None;
     }
-    let mut window = FitWindow::gather(chords, at, side);
+    window.gather_into(chords, at, side);
     // The weights should fall to zero where a chord leaves the window, so
     // that the points at neighbouring midpoints lie on one smooth curve,
     // and the reach should not move with every chord's rounding. Where
@@ -941,10 +946,11 @@ fn fitted_point(chords: &VecDeque<Chord>, at: usize, end: usize) -> Option<[f64;
 /// the window they saw: each is needed by the frames at its own midpoint
 /// and at both neighbours. Two fits with the same index and window end
 /// see the same chords and give the same bits.
-#[derive(Debug)]
 pub(super) struct FittedPoints {
     slots: [(u64, u64, Option<[f64; 3]>); 4],
     next: usize,
+    /// The fits' window, reused ([`FitWindow::gather_into`]).
+    window: FitWindow,
 }
 
 impl FittedPoints {
@@ -952,6 +958,7 @@ impl FittedPoints {
         FittedPoints {
             slots: [(u64::MAX, 0, None); 4],
             next: 0,
+            window: FitWindow::new(),
         }
     }
 
@@ -970,7 +977,7 @@ impl FittedPoints {
         if let Some(&(_, _, point)) = self.slots.iter().find(|s| s.0 == index && s.1 == seen) {
             return point;
         }
-        let point = fitted_point(chords, at, end);
+        let point = fitted_point(chords, at, end, &mut self.window);
         self.slots[self.next] = (index, seen, point);
         self.next = (self.next + 1) % self.slots.len();
         point
@@ -1118,18 +1125,28 @@ impl FitWindow {
         let chunks = used.div_ceil(4);
         let mut moments = [zero; 2 * FIT_TERMS - 1];
         let mut rhs0 = [zero; FIT_TERMS];
-        // Weights and u of each lane, kept for the second pass (X, Y and Z
-        // in one pass would need more registers than there are).
-        let mut wu = [(zero, zero); FIT_SLOTS / 4];
+        // The weight and u of chunk `c`'s lanes. Worked out again for the
+        // second pass (X, Y and Z in one pass would need more registers
+        // than there are): cheaper than an array that keeps them, which
+        // the compiler zeroes whole on every call.
+        macro_rules! weights {
+            ($c:expr) => {{
+                let c = $c;
+                let u = _mm256_mul_pd(load!(self.x, c), scale);
+                let r = _mm256_min_pd(_mm256_andnot_pd(sign, u), one);
+                let f = _mm256_sub_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), r));
+                let mask: [f64; 4] =
+                    std::array::from_fn(|l| if c * 4 + l < used { 1.0 } else { 0.0 });
+                // SAFETY: `mask` is four readable f64.
+                let mask = unsafe { _mm256_loadu_pd(mask.as_ptr()) };
+                (
+                    _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask),
+                    u,
+                )
+            }};
+        }
         for c in 0..chunks {
-            let u = _mm256_mul_pd(load!(self.x, c), scale);
-            let r = _mm256_min_pd(_mm256_andnot_pd(sign, u), one);
-            let f = _mm256_sub_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), r));
-            let mask: [f64; 4] = std::array::from_fn(|l| if c * 4 + l < used { 1.0 } else { 0.0 });
-            // SAFETY: `mask` is four readable f64.
-            let mask = unsafe { _mm256_loadu_pd(mask.as_ptr()) };
-            let w = _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask);
-            wu[c] = (w, u);
+            let (w, u) = weights!(c);
             let mut p = w;
             for (m, moment) in moments.iter_mut().enumerate() {
                 *moment = _mm256_add_pd(*moment, p);
@@ -1146,7 +1163,8 @@ impl FitWindow {
             }
         }
         let mut rhs12 = [[zero; FIT_TERMS]; 2];
-        for (c, &(w, u)) in wu.iter().enumerate().take(chunks) {
+        for c in 0..chunks {
+            let (w, u) = weights!(c);
             for (i, rhs) in rhs12.iter_mut().enumerate() {
                 let mut p = _mm256_mul_pd(w, load!(self.y[i + 1], c));
                 for (m, r) in rhs.iter_mut().enumerate() {
@@ -1183,16 +1201,29 @@ impl FitWindow {
     /// The midpoints of `chords[at]` and of `side` chords on each side,
     /// relative to the first's (reach unset).
     fn gather(chords: &VecDeque<Chord>, at: usize, side: usize) -> FitWindow {
-        let centre = &chords[at];
         let mut window = FitWindow::new();
-        window.used = 2 * side + 1;
+        window.gather_into(chords, at, side);
+        window
+    }
+
+    /// [`gather`](Self::gather) into this window, reused: only the slots
+    /// the sums read (whole lanes) are written, the rest keep whatever
+    /// they held (zeroing all of them showed in the planning time).
+    fn gather_into(&mut self, chords: &VecDeque<Chord>, at: usize, side: usize) {
+        let centre = &chords[at];
+        self.used = 2 * side + 1;
         for (k, c) in chords.range(at - side..=at + side).enumerate() {
-            window.x[k] = c.station - centre.station;
+            self.x[k] = c.station - centre.station;
             for i in 0..3 {
-                window.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+                self.y[i][k] = c.midpoint[i] - centre.midpoint[i];
             }
         }
-        window
+        for k in self.used..self.used.next_multiple_of(FIT_LANES) {
+            self.x[k] = 0.0;
+            for i in 0..3 {
+                self.y[i][k] = 0.0;
+            }
+        }
     }
 
     /// Path length from the centre to the farther outermost midpoint, mm.
@@ -3767,6 +3798,82 @@ mod tests {
                 "r {r}: curvature {k} against 1/{rm}"
             );
             assert!(f.curvature[1].abs() < 1e-9 * k);
+        }
+    }
+
+    /// The chords of the polyline through `vertices`, as the planner
+    /// queues them for the curve fit (one polyline, no corners).
+    fn chords_through(vertices: &[[f64; 3]]) -> VecDeque<Chord> {
+        let mut chords: VecDeque<Chord> = VecDeque::new();
+        for w in vertices.windows(2) {
+            let d: [f64; 3] = std::array::from_fn(|i| w[1][i] - w[0][i]);
+            let length = norm3(&d);
+            let mut chord = Chord {
+                midpoint: std::array::from_fn(|i| 0.5 * (w[0][i] + w[1][i])),
+                direction: std::array::from_fn(|i| d[i] / length),
+                length,
+                station: 0.0,
+                corner: true,
+            };
+            if let Some(b) = chords.back() {
+                chord.corner = b.bend2(&chord) > FIT_BEND * FIT_BEND;
+                chord.station = b.station + 0.5 * (b.length + chord.length);
+            }
+            chords.push_back(chord);
+        }
+        chords
+    }
+
+    #[test]
+    fn differenced_frames_give_the_curves_own_tangent_and_curvature() {
+        // A helix of radius R and pitch 2πc has curvature R / (R² + c²)
+        // everywhere; sampled at uneven steps (0.3, 1.0 and 1.7 times the
+        // mean in turn, so the midpoints are 0.65, 1.35 and 1.0 apart), the
+        // frame's differences must weigh their neighbours by the stations'
+        // spacing: with the mean spacing for both, the tangent comes out
+        // 7e-4 rad off (2.4e-7 in this cosine). The curvature keeps what
+        // the chords' uneven sag leaves in the fitted points (under 3e-4
+        // of it here).
+        for (radius, pitch, chord) in [(5.0, 0.0, 0.02), (2.0, 1.0, 0.01), (30.0, 5.0, 0.02)] {
+            let c = pitch / (2.0 * std::f64::consts::PI);
+            let speed = (radius * radius + c * c).sqrt();
+            let curvature = radius / (speed * speed);
+            let mut theta = 0.0f64;
+            let mut vertices = vec![];
+            for k in 0..401 {
+                vertices.push([radius * theta.cos(), radius * theta.sin(), c * theta]);
+                theta += chord / speed * [0.3, 1.0, 1.7][k % 3];
+            }
+            let chords = chords_through(&vertices);
+            for at in [200, 201, 202] {
+                let frame =
+                    differenced_frame(&chords, at, chords.len(), 0, &mut FittedPoints::new())
+                        .expect("a frame in the middle of the run");
+                // The helix at the parameter nearest the fitted point.
+                let p = frame.point;
+                let theta = p[1].atan2(p[0]);
+                let tangent = [
+                    -radius * theta.sin() / speed,
+                    radius * theta.cos() / speed,
+                    c / speed,
+                ];
+                let normal = [-theta.cos(), -theta.sin(), 0.0];
+                let off = ((p[0].hypot(p[1]) - radius).powi(2) + (p[2] - c * theta).powi(2)).sqrt();
+                assert!(off < 1e-4, "r {radius}: point {off} mm off the helix");
+                let along: f64 = (0..3).map(|i| frame.tangent[i] * tangent[i]).sum();
+                assert!(
+                    along > 1.0 - 1e-9,
+                    "r {radius}: tangent {:?} against {tangent:?}",
+                    frame.tangent
+                );
+                let k: [f64; 3] = std::array::from_fn(|i| frame.curvature[i] / curvature);
+                let err = norm3(&std::array::from_fn(|i| k[i] - normal[i]));
+                assert!(
+                    err < 1e-3,
+                    "r {radius}: curvature {:?} against {curvature} along {normal:?}",
+                    frame.curvature
+                );
+            }
         }
     }
 
