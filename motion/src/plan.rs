@@ -821,11 +821,12 @@ fn norm3(v: &[f64; 3]) -> f64 {
 /// derivatives of a different cubic: they differ from the fitted points'
 /// slope by a fraction of the rounding noise, which across a 0.02 mm
 /// blend is curvature rate, and v³·κ′ capped the speed. On a circle of
-/// R5 in 0.02 mm chords rounded to 1e-3 mm, the blends' median speed
-/// limit went from 15 to 47 mm/s with this, and the cycle time from 2.9
-/// to 1.04 times the exact circle's (`rounded_cam_chords_run_at_the_
-/// programmed_feed`). Elsewhere (ends of a run, where a neighbour's fit
-/// has too few chords) the fit's own derivatives stand.
+/// R5 in 0.02 mm chords rounded to 1e-3 mm on mill3, the blends' median
+/// speed limit went from 14 to 46 mm/s with this, and the cycle time from
+/// 2.85 to 1.29 times the exact circle's (at 1e-4 mm from 1.65 to 1.003;
+/// `rounded_cam_chords_run_at_the_programmed_feed`). Elsewhere (ends of
+/// a run, where a neighbour's fit has too few chords) the fit's own
+/// derivatives stand.
 fn fitted_frame(
     chords: &VecDeque<Chord>,
     at: usize,
@@ -910,8 +911,8 @@ fn frame_from_derivatives(point: [f64; 3], d1: [f64; 3], d2: [f64; 3]) -> Option
 const POINT_SIDE: usize = FIT_SIDE - 1;
 
 /// The point at the midpoint of `chords[at]` on the curve fitted through
-/// it and its neighbours ([`FitWindow::point`]), seeing chords before
-/// `end`.
+/// it and its neighbours ([`FitWindow::solve`]), seeing chords before
+/// `end`, gathered into `window`.
 fn fitted_point(
     chords: &VecDeque<Chord>,
     at: usize,
@@ -986,9 +987,9 @@ impl FittedPoints {
 
 /// How many chords a fit centred on the midpoint of `chords[at]` may take
 /// on each side, seeing those before `end`: as many as both sides have,
-/// up to `most`, before a corner (a bend over FIT_BEND), within FIT_REACH and FIT_TURN
-/// of the centre (turn measured as |u − u_centre|, which bounds how far
-/// the curve strays from a cubic there).
+/// up to `most`, before a corner (a bend over FIT_BEND), within FIT_REACH
+/// and FIT_TURN of the centre (turn measured as |u − u_centre|, which
+/// bounds how far the curve strays from a cubic there).
 fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usize {
     let centre = &chords[at];
     let within = |c: &Chord| {
@@ -1018,8 +1019,10 @@ fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usi
 /// Midpoints a curve fit sees around one line's midpoint, in path order,
 /// as many before it as after it: their path length from it (`x`, mm,
 /// negative before it) and their offsets from it (`y`, mm) in the first
-/// `used` slots; the rest are zero. Path lengths enter the fit as
-/// fractions of `reach`, mm, beyond which the weights are zero.
+/// `used` slots, zeros in the rest of the last lane of FIT_LANES slots,
+/// and whatever an earlier window left beyond (never read). Path lengths
+/// enter the fit as fractions of `reach`, mm, beyond which the weights
+/// are zero.
 struct FitWindow {
     x: [f64; FIT_SLOTS],
     y: [[f64; FIT_SLOTS]; 3],
