@@ -2,7 +2,8 @@
 //! independent lower bound, path deviation and limit use.
 //!
 //! Run: `cargo bench --bench motion` (add `-- --quick` to skip the
-//! 1,000,000-segment throughput run).
+//! 1,000,000-segment throughput run; `-- --corpus` prints planned / bound
+//! for LinuxCNC's planner stress programs instead, about a minute).
 //!
 //! The lower bound ("bound") is `kerf_motion::bound`: a time-optimal path
 //! parameterisation of the path the planner produced (its lines, arcs,
@@ -375,7 +376,96 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
     );
 }
 
+/// A machine for LinuxCNC's stress programs, which come in inches and
+/// anywhere: X Y Z over ±10 m with mill3's dynamics (jerk its default,
+/// 50 times the acceleration), as in `tests/linuxcnc_programs.rs`.
+fn corpus_machine() -> String {
+    let mut text = String::from(
+        "name = \"corpus\"\ndescription = \"X Y Z over +-10 m with mill3's dynamics\"\nkinematics = \"trivial\"\n",
+    );
+    let limits = "min = -10000.0\nmax = 10000.0\nmax_velocity = 150.0\nmax_acceleration = 1500.0\n";
+    for axis in ["x", "y", "z"] {
+        text += &format!("[axes.{axis}]\n{limits}");
+        text += &format!("[[joints]]\nname = \"{axis}\"\naxis = \"{axis}\"\n{limits}");
+    }
+    text
+}
+
+/// `-- --corpus`: planned / bound for every program of LinuxCNC's planner
+/// stress set (`tp-stress/performance`), each under its own path modes
+/// (the planner's default tolerance, 0.01 mm, where `G64` has no P), with
+/// the corpus's generic tool table. No targets: the table shows where the
+/// executor loses time against the bound beyond the programs.
+fn corpus() {
+    let root = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/conformance/linuxcnc-programs"
+    );
+    let dir = std::path::Path::new(root).join("tp-stress/performance");
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        println!("{}: not found; skipped", dir.display());
+        return;
+    };
+    let mut files: Vec<_> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "ngc"))
+        .collect();
+    files.sort();
+    let machine = kerf_machines::from_toml(&corpus_machine(), "corpus").unwrap();
+    let kins = &*machine.kinematics;
+    let tools = std::path::Path::new(root).join("generic-tools.tbl");
+    let planner = PlannerConfig::default();
+    println!("LinuxCNC's tp-stress/performance programs on X Y Z of ±10 m with mill3's dynamics");
+    println!(
+        "{:<32} {:>10} {:>10} {:>6} {:>8} {:>10} {:>6} {:>8}",
+        "program", "planned", "bound", "ratio", "segments", "deviation", "limits", "guarded"
+    );
+    for file in &files {
+        let name = file.file_name().unwrap().to_string_lossy();
+        let open = || kerf::cli::open_program(file, Position::ZERO, Some(&tools));
+        let (Ok(a), Ok(b)) = (open(), open()) else {
+            println!("{name:<32} cannot be read");
+            continue;
+        };
+        let report = match offline::run(a, kins, Position::ZERO, RunConfig { planner, record: 0 }) {
+            Ok(report) => report,
+            Err(e) => {
+                println!("{name:<32} not planned: {e}");
+                continue;
+            }
+        };
+        let segments = offline::plan_program(b, kins, Position::ZERO, planner, 1)
+            .expect("a program that runs plans");
+        let bound = bound::lower_bound(
+            &segments,
+            kins,
+            BoundConfig {
+                period: planner.period,
+                ..BoundConfig::default()
+            },
+        )
+        .time;
+        let most = worst(&report.axes)
+            .into_iter()
+            .chain(worst(&report.joints))
+            .fold(0.0, f64::max);
+        println!(
+            "{name:<32} {:>8.3} s {:>8.3} s {:>6.3} {:>8} {:>7.4} mm {most:>6.3} {:>8}",
+            report.cycle_time,
+            bound,
+            report.cycle_time / bound,
+            segments.len(),
+            report.max_deviation,
+            report.guard_takeovers,
+        );
+    }
+}
+
 fn main() {
+    if std::env::args().any(|a| a == "--corpus") {
+        corpus();
+        return;
+    }
     let quick = std::env::args().any(|a| a == "--quick");
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
