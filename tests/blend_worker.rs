@@ -76,3 +76,21 @@ fn rounded_circles_on_the_ox_glide_plan_the_same_with_the_blend_worker() {
     };
     assert_same("oxglide-x", home, &t);
 }
+
+#[test]
+fn polygons_at_the_edge_of_the_tolerance_plan_the_same_with_the_blend_worker() {
+    // Circles of R5 in 40 to 60 chords under G64 P0.01: around 49 chords
+    // the sag reaches the tolerance and the midpoint frames take a share
+    // of the vertices' curvature (the planner's MID_SHARES), which the
+    // worker must pick as the planner does.
+    let mut t = String::from("G21 G90 G17 G64 P0.01 Q0 F3000\nG0 X105 Y100 Z-10\nG1\n");
+    for n in 40..=60 {
+        for k in 1..=n {
+            let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+            let (x, y) = (100.0 + 5.0 * a.cos(), 100.0 + 5.0 * a.sin());
+            writeln!(t, "X{x:.4} Y{y:.4}").unwrap();
+        }
+    }
+    t += "M2\n";
+    assert_same("mill3", Position::ZERO, &t);
+}

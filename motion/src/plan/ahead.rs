@@ -30,8 +30,8 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::{
-    blend_legs, blend_near, corner_legs, fitted_frame, frame_on, hairpin, xyz_frame, Chord,
-    FittedPoints, FrameXyz, PathMode, Planner, Programmed, CORNER_TRIES, FIT_SIDE,
+    blend_legs, blend_near, corner_legs, fitted_frame, frame_on, hairpin, vertex_midpoint,
+    xyz_frame, Chord, FittedPoints, FrameXyz, PathMode, Programmed, CORNER_TRIES, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -979,19 +979,15 @@ impl Worker {
                 let fallback = if bc.is_some() {
                     Fallback::Untried
                 } else {
-                    let mut mid = b.frame_at(legs.1, false);
-                    mid.curvature = Planner::mid_curvature(a, b, c);
-                    let (control, near) = blend_near(a, b, tolerance, legs, &start, &mid);
-                    let c_start = c.frame_at(legs_bc.1, false);
-                    match near.then(|| blend_near(b, c, tol_c, legs_bc, &mid, &c_start)) {
-                        Some((control_bc, true)) => {
+                    match vertex_midpoint(a, b, c, legs, legs_bc, &start, tolerance, tol_c) {
+                        Some((mid, control, control_bc)) => {
                             s.sampled = Some(Blend::sampled(control));
                             Fallback::Within {
                                 mid: xyz_frame(&mid),
                                 bc: control_bc.map(|q| [q[0], q[1], q[2]]),
                             }
                         }
-                        _ => Fallback::Outside,
+                        None => Fallback::Outside,
                     }
                 };
                 ended = match (&fit, bc, &fallback) {
