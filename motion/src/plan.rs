@@ -4076,8 +4076,8 @@ mod tests {
             assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
         }
         // Chords of 0.01 mm: the fit takes up to 49 of them each side, to
-        // its 0.5 mm reach. Rounded to 1e-5 and 1e-4 mm they run 1.007 and
-        // 1.024 times the exact circle's time (with 23 lines each side,
+        // its 0.5 mm reach. Rounded to 1e-5 and 1e-4 mm they run 1.015 and
+        // 1.033 times the exact circle's time (with 23 lines each side,
         // well inside the reach, 1.19 and 2.37 times where the reach
         // followed the window's extent, and 1.007 and 1.45 where it sat
         // half a chord past it).
