@@ -343,15 +343,7 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
     )
     .expect("benchmark programs plan");
     let t0 = Instant::now();
-    let bound = bound::lower_bound(
-        &segments,
-        kins,
-        BoundConfig {
-            period: planner.period,
-            ..BoundConfig::default()
-        },
-    )
-    .time;
+    let bound = bound::lower_bound(&segments, kins, BoundConfig::for_planner(&planner)).time;
     let bound_wall = t0.elapsed().as_secs_f64();
     let poly = match polyline_bound(program, kins, TOLERANCE) {
         Some(t) => format!("{t:>8.3} s"),
@@ -436,15 +428,7 @@ fn corpus() {
         };
         let segments = offline::plan_program(b, kins, Position::ZERO, planner, 1)
             .expect("a program that runs plans");
-        let bound = bound::lower_bound(
-            &segments,
-            kins,
-            BoundConfig {
-                period: planner.period,
-                ..BoundConfig::default()
-            },
-        )
-        .time;
+        let bound = bound::lower_bound(&segments, kins, BoundConfig::for_planner(&planner)).time;
         let most = worst(&report.axes)
             .into_iter()
             .chain(worst(&report.joints))

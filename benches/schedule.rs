@@ -40,15 +40,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
     .cycle_time;
     let segments =
         plan_program(run(), kins, Position::ZERO, planner, 1).expect("benchmark programs plan");
-    let bound = lower_bound(
-        &segments,
-        kins,
-        BoundConfig {
-            period: planner.period,
-            ..BoundConfig::default()
-        },
-    )
-    .time;
+    let bound = lower_bound(&segments, kins, BoundConfig::for_planner(&planner)).time;
     let t0 = Instant::now();
     let config = ScheduleConfig {
         period: planner.period,

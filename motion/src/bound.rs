@@ -125,7 +125,7 @@ use kerf_interp::Position;
 
 use crate::kinematics::{Kinematics, MAX_JOINTS};
 use crate::path::{Arc, Frame, Shape, Vec9};
-use crate::plan::{Segment, SegmentKind};
+use crate::plan::{PlannerConfig, Segment, SegmentKind};
 
 /// Fewest steps on a curved segment, however short: short arcs and blends
 /// bend their limits fastest.
@@ -148,6 +148,19 @@ pub struct BoundConfig {
     /// Apply the axes' jerk limits (as the planner does when
     /// `PlannerConfig::jerk_limited`).
     pub jerk: bool,
+}
+
+impl BoundConfig {
+    /// The bound for segments `planner` planned: its servo period at kinks
+    /// and curvature jumps, the jerk limits if its profiles are
+    /// jerk-limited, and the default sample spacing.
+    pub fn for_planner(planner: &PlannerConfig) -> BoundConfig {
+        BoundConfig {
+            period: planner.period,
+            jerk: planner.jerk_limited,
+            ..BoundConfig::default()
+        }
+    }
 }
 
 impl Default for BoundConfig {

@@ -4066,30 +4066,28 @@ mod tests {
         // differenced from the fitted points ([`differenced_frame`]),
         // 1.02, 1.03 and 1.59 times with three points, 1.02, 1.03 and
         // 1.064 with five.
-        for (decimals, within) in [(5, 1.05), (4, 1.08), (3, 1.15)] {
-            let (time, _, deviation, use_) = rounded_circle(decimals, 0.02);
-            assert!(
-                time < exact * within,
-                "{decimals} decimals: {time} s against {exact} s for the exact circle"
-            );
-            assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
-            assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
-        }
+        //
         // Chords of 0.01 mm: the fit takes up to 49 of them each side, to
         // its 0.5 mm reach. Rounded to 1e-5 and 1e-4 mm they run 1.015 and
         // 1.033 times the exact circle's time (with 23 lines each side,
         // well inside the reach, 1.19 and 2.37 times where the reach
         // followed the window's extent, and 1.007 and 1.45 where it sat
         // half a chord past it).
-        let (exact, _, _, _) = rounded_circle(9, 0.01);
-        for (decimals, within) in [(5, 1.03), (4, 1.06)] {
-            let (time, _, deviation, use_) = rounded_circle(decimals, 0.01);
-            assert!(
-                time < exact * within,
-                "0.01 mm chords, {decimals} decimals: {time} s against {exact} s"
-            );
-            assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
-            assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
+        let cases: [(f64, &[(usize, f64)]); 2] = [
+            (0.02, &[(5, 1.05), (4, 1.08), (3, 1.15)]),
+            (0.01, &[(5, 1.03), (4, 1.06)]),
+        ];
+        for (chord, roundings) in cases {
+            let (exact, _, _, _) = rounded_circle(9, chord);
+            for &(decimals, within) in roundings {
+                let (time, _, deviation, use_) = rounded_circle(decimals, chord);
+                assert!(
+                    time < exact * within,
+                    "{chord} mm chords, {decimals} decimals: {time} s against {exact} s exact"
+                );
+                assert!(deviation <= 0.01 + 1e-9, "deviation {deviation}");
+                assert!(use_ <= 1.0 + 1e-6, "limit use {use_}");
+            }
         }
     }
 }
