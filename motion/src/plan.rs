@@ -892,7 +892,8 @@ fn fitted_frame(
     if side < FIT_MIN_SIDE {
         return None;
     }
-    let mut window = FitWindow::gather(chords, at, side);
+    let window = &mut points.window;
+    window.gather_into(chords, at, side);
     window.reach = 1.25 * window.extent();
     let mut frame = window.fit()?;
     for i in 0..3 {
@@ -1050,7 +1051,8 @@ fn fitted_point(
 pub(super) struct FittedPoints {
     slots: [(u64, u64, Option<[f64; 3]>); 6],
     next: usize,
-    /// The fits' window, reused ([`FitWindow::gather_into`]).
+    /// The fits' window, reused by every fit of its caller
+    /// ([`FitWindow::gather_into`]).
     window: FitWindow,
 }
 
@@ -1302,16 +1304,10 @@ impl FitWindow {
     }
 
     /// The midpoints of `chords[at]` and of `side` chords on each side,
-    /// relative to the first's (reach unset).
-    fn gather(chords: &VecDeque<Chord>, at: usize, side: usize) -> FitWindow {
-        let mut window = FitWindow::new();
-        window.gather_into(chords, at, side);
-        window
-    }
-
-    /// [`gather`](Self::gather) into this window, reused: only the slots
-    /// the sums read (whole lanes) are written, the rest keep whatever
-    /// they held (zeroing all of them showed in the planning time).
+    /// relative to the first's, into this window (reach unset): only the
+    /// slots the sums read (whole lanes) are written, the rest keep
+    /// whatever they held (zeroing all of them showed in the planning
+    /// time).
     fn gather_into(&mut self, chords: &VecDeque<Chord>, at: usize, side: usize) {
         let centre = &chords[at];
         self.used = 2 * side + 1;
