@@ -7,11 +7,10 @@
 //! each segment may still have to give away against the bound, and
 //! `executor / schedule` the least such a planner would gain.
 //!
-//! Run: `cargo bench --bench schedule` (about five minutes on this
-//! project's 2-core VM), or with `-- LINES PASSES` for the first LINES
-//! lines of stellabee1.ngc (default 2000) and PASSES linear programs per
-//! stretch (default 6). The whole file would take hours: the schedule
-//! solves a sparse linear program per stretch between stops.
+//! Run: `cargo bench --bench schedule` (about 40 s on this project's
+//! 2-core VM), or with `-- LINES PASSES` for the first LINES lines of
+//! stellabee1.ngc (default 2000; `-- 200000` for the whole file) and
+//! PASSES linear programs per stretch (default 6).
 
 #[path = "programs.rs"]
 mod programs;
