@@ -65,6 +65,8 @@ pub(super) struct BandedLp {
     rhs: Vec<f64>,
     /// Columns held at zero.
     fixed: Vec<usize>,
+    /// A row with no terms and a negative bound was pushed.
+    impossible: bool,
 }
 
 /// Why a linear program has no solution from [`BandedLp::solve`].
@@ -73,8 +75,12 @@ pub(super) enum Failure {
     /// A row's terms span more than three neighbouring columns, or name
     /// a column past the last.
     NotBanded,
+    /// A row reads 0 ≤ a negative bound (on its own, or once the columns
+    /// held at zero drop out of it).
+    Infeasible,
     /// No convergence within [`MOST_STEPS`] Newton steps, or the
-    /// arithmetic broke down (infeasible or unbounded programs end here).
+    /// arithmetic broke down (infeasible or unbounded programs that no
+    /// single row gives away end here).
     NoConvergence,
 }
 
@@ -115,14 +121,8 @@ impl BandedLp {
             }
         }
         if low == usize::MAX {
-            // 0 ≤ bound: nothing to keep unless it cannot hold.
-            if bound < 0.0 {
-                // An impossible row; keep it on column 0 so that the
-                // solver reports the program infeasible.
-                self.first.push(0);
-                self.coef.push([0.0; 3]);
-                self.rhs.push(bound);
-            }
+            // 0 ≤ bound: nothing to keep, but it may not hold.
+            self.impossible |= bound < 0.0;
             return Ok(());
         }
         if high >= self.columns || high - low > 2 {
@@ -148,6 +148,9 @@ impl BandedLp {
     pub(super) fn solve(&self, c: &[f64], scale: f64) -> Result<Vec<f64>, Failure> {
         let n = self.columns;
         assert_eq!(c.len(), n, "one objective coefficient per column");
+        if self.impossible {
+            return Err(Failure::Infeasible);
+        }
         if n == 0 {
             return Ok(Vec::new());
         }
@@ -157,7 +160,7 @@ impl BandedLp {
             1.0
         };
         // Scaled rows: x = scale·y, each row divided by its largest
-        // coefficient (rows of zeros stay as they are).
+        // coefficient; rows left with nothing but held columns drop out.
         // Two columns of padding, held at zero, so that every row's three
         // columns are in range and the row loops need no tests.
         let padded = n + 2;
@@ -183,7 +186,7 @@ impl BandedLp {
             if big == 0.0 {
                 // Only held columns: 0 ≤ bound.
                 if self.rhs[r] < 0.0 {
-                    return Err(Failure::NoConvergence);
+                    return Err(Failure::Infeasible);
                 }
                 continue;
             }
@@ -575,6 +578,14 @@ mod tests {
         lp.push(&[(1, 1.0)], -1.0).unwrap();
         lp.push(&[(1, -1.0)], 0.0).unwrap();
         assert!(lp.solve(&[0.0, -1.0, 0.0], 1.0).is_err());
+        // A row that holding a column at zero leaves impossible.
+        let mut lp = BandedLp::new(3);
+        lp.fix_zero(1);
+        lp.push(&[(1, 1.0)], -1.0).unwrap();
+        assert_eq!(lp.solve(&[0.0; 3], 1.0), Err(Failure::Infeasible));
+        let mut lp = BandedLp::new(3);
+        lp.push(&[(1, 0.0)], -1.0).unwrap();
+        assert_eq!(lp.solve(&[0.0; 3], 1.0), Err(Failure::Infeasible));
     }
 
     /// A row as the tests keep it: first column, coefficients, bound.
