@@ -418,7 +418,6 @@ impl Scaled<'_> {
         let mut x = vec![0.0; n];
         let mut s: Vec<f64> = self.h.iter().map(|&h| h.max(1.0)).collect();
         let mut z = vec![1.0; m];
-        let h_size = 1.0 + self.h.iter().fold(0.0f64, |b, h| b.max(h.abs()));
         let c_size = 1.0 + self.c.iter().fold(0.0f64, |b, c| b.max(c.abs()));
 
         let mut gx = vec![0.0; m];
@@ -447,7 +446,14 @@ impl Scaled<'_> {
             let gap: f64 = s.iter().zip(&z).map(|(s, z)| s * z).sum();
             let mu = gap / m as f64;
             let objective: f64 = self.c.iter().zip(&x).map(|(c, x)| c * x).sum();
-            let p_res = rp.iter().fold(0.0f64, |b, r| b.max(r.abs())) / h_size;
+            // Row by row against its own bound: the schedule's limits are
+            // its rows, and a residual judged against the largest bound of
+            // the stretch let rows with small bounds (slow stretches) be
+            // broken by a part in a thousand (stellabee1.ngc, whole file).
+            let p_res = rp
+                .iter()
+                .zip(self.h)
+                .fold(0.0f64, |b, (r, h)| b.max(r.abs() / (1.0 + h.abs())));
             let d_res = rd.iter().fold(0.0f64, |b, r| b.max(r.abs())) / c_size;
             if !(p_res.is_finite() && d_res.is_finite() && gap.is_finite()) {
                 return Err(Failure::NoConvergence);
