@@ -448,8 +448,8 @@ impl Scaled<'_> {
             let objective: f64 = self.c.iter().zip(&x).map(|(c, x)| c * x).sum();
             // Row by row against its own bound: the schedule's limits are
             // its rows, and a residual judged against the largest bound of
-            // the stretch let rows with small bounds (slow stretches) be
-            // broken by a part in a thousand (stellabee1.ngc, whole file).
+            // a stretch would let rows with small bounds (slow stretches)
+            // be broken by more than the tolerance.
             let p_res = rp
                 .iter()
                 .zip(self.h)
