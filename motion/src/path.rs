@@ -491,28 +491,24 @@ impl Blend {
         // B′(0) = 5(Q1 − Q0), B″(0) = 20(Q2 − 2Q1 + Q0), and mirrored at 1:
         // with B′ = scale·t and B″ = scale²·k these give the control points.
         let l2 = scale * scale;
+        // Axes whose tangent and curvature are zero at both ends stand at
+        // the end points; past X Y Z that is every blend the planner
+        // makes, so only X Y Z are worked out then (a third of the
+        // arithmetic, which showed in planning dense curves).
         let still = |v: &Vec9| v[3..].iter().all(|&x| x == 0.0);
-        if still(t0) && still(k0) && still(t1) && still(k1) {
-            // Only X Y Z move (every blend the planner makes): the other
-            // axes stand at the end points, which is what the general
-            // formula below gives them, in a third of the arithmetic.
-            let mut q = [*p0, *p0, *p0, *p1, *p1, *p1];
-            for i in 0..3 {
-                q[1][i] = p0[i] + scale * t0[i] / 5.0;
-                q[2][i] = p0[i] + 2.0 * scale * t0[i] / 5.0 + l2 * k0[i] / 20.0;
-                q[3][i] = p1[i] - 2.0 * scale * t1[i] / 5.0 + l2 * k1[i] / 20.0;
-                q[4][i] = p1[i] - scale * t1[i] / 5.0;
-            }
-            return q;
+        let moving = if still(t0) && still(k0) && still(t1) && still(k1) {
+            3
+        } else {
+            9
+        };
+        let mut q = [*p0, *p0, *p0, *p1, *p1, *p1];
+        for i in 0..moving {
+            q[1][i] = p0[i] + scale * t0[i] / 5.0;
+            q[2][i] = p0[i] + 2.0 * scale * t0[i] / 5.0 + l2 * k0[i] / 20.0;
+            q[3][i] = p1[i] - 2.0 * scale * t1[i] / 5.0 + l2 * k1[i] / 20.0;
+            q[4][i] = p1[i] - scale * t1[i] / 5.0;
         }
-        [
-            *p0,
-            std::array::from_fn(|i| p0[i] + scale * t0[i] / 5.0),
-            std::array::from_fn(|i| p0[i] + 2.0 * scale * t0[i] / 5.0 + l2 * k0[i] / 20.0),
-            std::array::from_fn(|i| p1[i] - 2.0 * scale * t1[i] / 5.0 + l2 * k1[i] / 20.0),
-            std::array::from_fn(|i| p1[i] - scale * t1[i] / 5.0),
-            *p1,
-        ]
+        q
     }
 
     /// The blend with these control points, with its arc-length table.
