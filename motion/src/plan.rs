@@ -3906,23 +3906,15 @@ mod tests {
     }
 
     /// The chords of the polyline through `vertices`, as the planner
-    /// queues them for the curve fit (one polyline, no corners).
+    /// queues them for the curve fit ([`Chord::of`]).
     fn chords_through(vertices: &[[f64; 3]]) -> VecDeque<Chord> {
         let mut chords: VecDeque<Chord> = VecDeque::new();
         for w in vertices.windows(2) {
-            let d: [f64; 3] = std::array::from_fn(|i| w[1][i] - w[0][i]);
-            let length = norm3(&d);
-            let mut chord = Chord {
-                midpoint: std::array::from_fn(|i| 0.5 * (w[0][i] + w[1][i])),
-                direction: std::array::from_fn(|i| d[i] / length),
-                length,
-                station: 0.0,
-                corner: true,
-            };
-            if let Some(b) = chords.back() {
-                chord.corner = b.bend2(&chord) > FIT_BEND * FIT_BEND;
-                chord.station = b.station + 0.5 * (b.length + chord.length);
-            }
+            let line = Programmed::new(Line {
+                start: std::array::from_fn(|i| if i < 3 { w[0][i] } else { 0.0 }),
+                end: std::array::from_fn(|i| if i < 3 { w[1][i] } else { 0.0 }),
+            });
+            let chord = Chord::of(&line, chords.back());
             chords.push_back(chord);
         }
         chords
