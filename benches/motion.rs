@@ -368,25 +368,11 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
     );
 }
 
-/// A machine for LinuxCNC's stress programs, which come in inches and
-/// anywhere: X Y Z over ±10 m with mill3's dynamics (jerk its default,
-/// 50 times the acceleration), as in `tests/linuxcnc_programs.rs`.
-fn corpus_machine() -> String {
-    let mut text = String::from(
-        "name = \"corpus\"\ndescription = \"X Y Z over +-10 m with mill3's dynamics\"\nkinematics = \"trivial\"\n",
-    );
-    let limits = "min = -10000.0\nmax = 10000.0\nmax_velocity = 150.0\nmax_acceleration = 1500.0\n";
-    for axis in ["x", "y", "z"] {
-        text += &format!("[axes.{axis}]\n{limits}");
-        text += &format!("[[joints]]\nname = \"{axis}\"\naxis = \"{axis}\"\n{limits}");
-    }
-    text
-}
-
 /// `-- --corpus`: planned / bound for every program of LinuxCNC's planner
 /// stress set (`tp-stress/performance`), each under its own path modes
 /// (the planner's default tolerance, 0.01 mm, where `G64` has no P), with
-/// the corpus's generic tool table. No targets: the table shows where the
+/// the corpus's generic tool table, on the machine the programs' test
+/// runs them on (`programs::corpus_machine`). No targets: the table shows where the
 /// executor loses time against the bound beyond the programs.
 fn corpus() {
     let root = concat!(
@@ -403,11 +389,11 @@ fn corpus() {
         .filter(|p| p.extension().is_some_and(|x| x == "ngc"))
         .collect();
     files.sort();
-    let machine = kerf_machines::from_toml(&corpus_machine(), "corpus").unwrap();
+    let machine = kerf_machines::from_toml(&programs::corpus_machine(), "corpus").unwrap();
     let kins = &*machine.kinematics;
     let tools = std::path::Path::new(root).join("generic-tools.tbl");
     let planner = PlannerConfig::default();
-    println!("LinuxCNC's tp-stress/performance programs on X Y Z of ±10 m with mill3's dynamics");
+    println!("LinuxCNC's tp-stress/performance programs on nine axes of ±10 m, X Y Z with mill3's dynamics");
     println!(
         "{:<32} {:>10} {:>10} {:>6} {:>8} {:>10} {:>6} {:>8}",
         "program", "planned", "bound", "ratio", "segments", "deviation", "limits", "guarded"

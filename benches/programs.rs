@@ -1,5 +1,7 @@
 //! The benchmark programs, shared by `benches/motion.rs` and
-//! `tests/time_bound.rs` (included with `#[path]`).
+//! `tests/time_bound.rs` (included with `#[path]`), and the machine
+//! LinuxCNC's sample programs run on, shared by `benches/motion.rs` and
+//! `tests/linuxcnc_programs.rs`.
 
 #![allow(dead_code)]
 
@@ -60,4 +62,36 @@ pub fn stellabee() -> Option<String> {
     );
     let text = std::fs::read_to_string(path).ok()?;
     Some(format!("G21 G10 L2 P1 X100 Y50 Z-20\nG54\n{text}"))
+}
+
+/// A trivial machine moving all nine axes over ±10 m, for LinuxCNC's
+/// sample programs, which come in inches and anywhere: mill3's dynamics
+/// on the linear axes (jerk its default, 50 times the acceleration), fast
+/// rotary ones, and a few simulated pins for their M62–M66.
+pub fn corpus_machine() -> String {
+    let mut text = String::from(
+        r#"name = "big9"
+description = "Nine trivial axes over +-10 m, for LinuxCNC's sample programs"
+kinematics = "trivial"
+[hal]
+backend = "sim"
+[hal.pins]
+digital_out = ["d0", "d1", "d2", "d3"]
+digital_in = ["i0", "i1"]
+analog_out = ["a0", "a1"]
+"#,
+    );
+    for (i, axis) in "xyzabcuvw".chars().enumerate() {
+        let (v, a) = if (3..6).contains(&i) {
+            (3600.0, 36000.0)
+        } else {
+            (150.0, 1500.0)
+        };
+        let limits = format!(
+            "min = -10000.0\nmax = 10000.0\nmax_velocity = {v:.1}\nmax_acceleration = {a:.1}\n"
+        );
+        text += &format!("[axes.{axis}]\n{limits}");
+        text += &format!("[[joints]]\nname = \"{axis}\"\naxis = \"{axis}\"\n{limits}");
+    }
+    text
 }

@@ -16,6 +16,9 @@
 #[path = "support/shared.rs"]
 mod shared;
 
+#[path = "../benches/programs.rs"]
+mod programs;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -117,36 +120,11 @@ const REFUSED: &[(&str, &str)] = &[
 /// build).
 const LEFT_TO_THE_BENCH: &str = "tp-stress/performance/stellabee1.ngc";
 
-/// A trivial machine moving all nine axes over ±10 m, with mill3's
-/// dynamics on the linear axes.
-const BIG: &str = r#"
-name = "big9"
-description = "Nine trivial axes over +-10 m, for LinuxCNC's sample programs"
-kinematics = "trivial"
-[hal]
-backend = "sim"
-[hal.pins]
-digital_out = ["d0", "d1", "d2", "d3"]
-digital_in = ["i0", "i1"]
-analog_out = ["a0", "a1"]
-"#;
-
+/// The corpus machine (`benches/programs.rs`), written where the
+/// command-line tools can read it.
 fn machine_file(dir: &Path) -> PathBuf {
-    let mut text = BIG.to_string();
-    for (i, axis) in "xyzabcuvw".chars().enumerate() {
-        let (v, a) = if (3..6).contains(&i) {
-            (3600.0, 36000.0)
-        } else {
-            (150.0, 1500.0)
-        };
-        let limits = format!(
-            "min = -10000.0\nmax = 10000.0\nmax_velocity = {v:.1}\nmax_acceleration = {a:.1}\n"
-        );
-        text += &format!("[axes.{axis}]\n{limits}");
-        text += &format!("[[joints]]\nname = \"{axis}\"\naxis = \"{axis}\"\n{limits}");
-    }
     let path = dir.join("big9.toml");
-    std::fs::write(&path, text).unwrap();
+    std::fs::write(&path, programs::corpus_machine()).unwrap();
     path
 }
 
