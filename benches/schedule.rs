@@ -10,7 +10,11 @@
 //! Run: `cargo bench --bench schedule` (about 40 s on this project's
 //! 2-core VM), or with `-- LINES PASSES` for the first LINES lines of
 //! stellabee1.ngc (default 2000; `-- 200000` for the whole file) and
-//! PASSES linear programs per stretch (default 6).
+//! PASSES linear programs per stretch (default 6). `-- LINES PASSES
+//! HORIZON [COMMIT]` solves the stretches in windows of HORIZON nodes,
+//! keeping COMMIT of each (default a quarter), as a planner that runs
+//! ahead of the motion must (`kerf_motion::schedule::Window`); about
+//! 100 s at `2000 6 2000 500`.
 
 #[path = "programs.rs"]
 mod programs;
@@ -20,10 +24,10 @@ use std::time::Instant;
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::{self, plan_program, RunConfig};
-use kerf_motion::schedule::{schedule, ScheduleConfig};
+use kerf_motion::schedule::{schedule, ScheduleConfig, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig};
 
-fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
+fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize, window: Option<Window>) {
     let planner = PlannerConfig {
         mode: PathMode::Blend { tolerance: 0.01 },
         ..PlannerConfig::default()
@@ -44,6 +48,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
     let config = ScheduleConfig {
         period: planner.period,
         passes,
+        window,
         ..ScheduleConfig::default()
     };
     let found = schedule(&segments, kins, config).expect("mill3 has trivial kinematics");
@@ -51,7 +56,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
     let used = found.limit_use(kins).expect("mill3 has trivial kinematics");
     let time = found.scaled_time(&used);
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {wall:>7.1} s",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s",
         executor / bound,
         time / bound,
         executor / time,
@@ -61,6 +66,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize) {
         found.v.len(),
         found.stretches,
         found.failed,
+        found.windows,
     );
 }
 
@@ -71,11 +77,27 @@ fn main() {
         .collect();
     let lines = numbers.first().copied().unwrap_or(2000);
     let passes = numbers.get(1).copied().unwrap_or(6);
+    let window = match (numbers.get(2), numbers.get(3)) {
+        (Some(&horizon), Some(&commit)) => Some(Window { horizon, commit }),
+        (Some(&horizon), None) => Some(Window {
+            horizon,
+            commit: horizon / 4,
+        }),
+        _ => None,
+    };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes");
+    match window {
+        None => println!(
+            "machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes, each stretch whole"
+        ),
+        Some(w) => println!(
+            "machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes per window of {} nodes, {} kept of each",
+            w.horizon, w.commit
+        ),
+    }
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>9}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}",
         "program",
         "executor",
         "bound",
@@ -89,6 +111,7 @@ fn main() {
         "nodes",
         "stops",
         "bad",
+        "win",
         "solve"
     );
     row(
@@ -96,12 +119,14 @@ fn main() {
         &programs::circle_small_segments(),
         kins,
         passes,
+        window,
     );
     row(
         "zig-zag pocket 60x40",
         &programs::zigzag_pocket(),
         kins,
         passes,
+        window,
     );
     match programs::stellabee() {
         Some(text) => {
@@ -112,6 +137,7 @@ fn main() {
                 &head.join("\n"),
                 kins,
                 passes,
+                window,
             );
         }
         None => println!("stellabee1.ngc: ../shared/conformance not found, skipped"),
@@ -121,5 +147,6 @@ fn main() {
         "v a j: largest axis velocity, acceleration and jerk use of the schedule at its nodes"
     );
     println!("(schedule times are slowed by any excess, the solver's tolerance, up to 1e-5)");
-    println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on");
+    println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on;");
+    println!("win: windows solved (0: each stretch whole)");
 }

@@ -4,7 +4,7 @@
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::plan_program;
-use kerf_motion::schedule::{schedule, Schedule, ScheduleConfig, ScheduleError};
+use kerf_motion::schedule::{schedule, Schedule, ScheduleConfig, ScheduleError, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig, Segment};
 
 fn planned(program: &str, kins: &dyn Kinematics, start: Position) -> Vec<Segment> {
@@ -28,8 +28,7 @@ fn planned(program: &str, kins: &dyn Kinematics, start: Position) -> Vec<Segment
 /// (`Schedule::scaled_time` takes that off).
 const SOLVER_TOLERANCE: f64 = 1e-4;
 
-/// Coarser than the default, to keep the debug build quick (clarabel's
-/// generic solver is instantiated, unoptimised, in the test build).
+/// Coarser than the default, to keep the unoptimised test build quick.
 fn config() -> ScheduleConfig {
     ScheduleConfig {
         ds: 0.02,
@@ -116,14 +115,8 @@ fn a_line_from_rest_to_rest_takes_the_s_curve_time() {
     }
 }
 
-/// The bound is a lower bound on every motion within the limits, the
-/// schedule is one such motion: corners, arcs and a dense curve, with
-/// stops and blends.
-#[test]
-fn the_schedule_is_no_quicker_than_the_lower_bound() {
-    let machine = kerf_machines::load("mill3").unwrap();
-    let kins = &*machine.kinematics;
-    let start = Position::xyz(50.0, 50.0, -10.0);
+/// Corners, an arc and a dense curve from (50, 50), blended and stopped.
+fn corners_arc_and_curve() -> String {
     let mut program =
         String::from("G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\n");
     for k in 1..=60 {
@@ -134,8 +127,18 @@ fn the_schedule_is_no_quicker_than_the_lower_bound() {
             60.0 + 8.0 * a.sin()
         );
     }
-    program += "G61 G1 X50 Y50\nM2\n";
-    let (segments, schedule) = solved(&program, kins, start);
+    program + "G61 G1 X50 Y50\nM2\n"
+}
+
+/// The bound is a lower bound on every motion within the limits, the
+/// schedule is one such motion: corners, arcs and a dense curve, with
+/// stops and blends.
+#[test]
+fn the_schedule_is_no_quicker_than_the_lower_bound() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -10.0);
+    let (segments, schedule) = solved(&corners_arc_and_curve(), kins, start);
     let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
     eprintln!("schedule {:.5} s, bound {bound:.5} s", schedule.time);
     assert!(
@@ -155,6 +158,128 @@ fn the_schedule_is_no_quicker_than_the_lower_bound() {
     assert!(
         used.acceleration > 0.99 && used.jerk > 0.99,
         "limits reached: {used:?}"
+    );
+}
+
+/// The distance the seven-phase S-curve takes to stop from speed `v`
+/// (ramping down from v to rest mirrors ramping up, which covers v times
+/// half its duration).
+fn s_curve_stop(v: f64, a: f64, j: f64) -> f64 {
+    let ramp = if v >= a * a / j {
+        v / a + a / j
+    } else {
+        2.0 * (v / j).sqrt()
+    };
+    v * ramp / 2.0
+}
+
+/// The speed from which the S-curve stops in `distance`.
+fn s_curve_speed_stopping_in(distance: f64, a: f64, j: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, 1e4);
+    for _ in 0..200 {
+        let v = 0.5 * (lo + hi);
+        if s_curve_stop(v, a, j) > distance {
+            hi = v;
+        } else {
+            lo = v;
+        }
+    }
+    lo
+}
+
+/// Solved in windows, as a planner running ahead must be, the schedule
+/// can go no faster than it could stop within one window: every window
+/// ends at rest. With windows longer than the stop, a line runs as it
+/// does solved whole; with shorter ones, its top speed is between the
+/// speeds that stop within the window's unkept part and within the
+/// whole window, and the seams between windows keep every limit.
+#[test]
+fn windows_cap_the_speed_at_what_stops_within_them() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    // mill3's X: 1500 mm/s², 75,000 mm/s³; F6000 is 100 mm/s, which
+    // takes 4.33 mm to stop.
+    let program = "G21 G90 G1 F6000 X40\nM2\n";
+    let (segments, whole) = solved(program, kins, start);
+    let windowed = |horizon: usize, commit: usize| {
+        let config = ScheduleConfig {
+            window: Some(Window { horizon, commit }),
+            ..config()
+        };
+        let found = schedule(&segments, kins, config).unwrap();
+        assert_eq!(found.failed, 0, "every linear program solved");
+        assert!(found.windows > 1, "solved in {} windows", found.windows);
+        let used = found.limit_use(kins).unwrap();
+        assert!(
+            used.slowdown() <= 1.0 + SOLVER_TOLERANCE,
+            "windows of {horizon}: {used:?}"
+        );
+        found
+    };
+    let ds = config().ds;
+
+    // 8 mm windows, 2 mm kept of each.
+    let long = windowed(400, 100);
+    let top = long.v.iter().copied().fold(0.0, f64::max);
+    assert!((top - 100.0).abs() < 1e-3, "top speed {top} mm/s");
+    assert!(
+        (long.time / whole.time - 1.0).abs() < 2e-3,
+        "in windows {:.5} s, whole {:.5} s",
+        long.time,
+        whole.time
+    );
+
+    // 2 mm windows, 0.5 mm kept of each.
+    let (horizon, commit) = (100, 25);
+    let short = windowed(horizon, commit);
+    let top = short.v.iter().copied().fold(0.0, f64::max);
+    let most = s_curve_speed_stopping_in(horizon as f64 * ds, 1500.0, 75_000.0);
+    let least = s_curve_speed_stopping_in((horizon - commit) as f64 * ds, 1500.0, 75_000.0);
+    eprintln!("2 mm windows: top speed {top:.3} mm/s, between {least:.3} and {most:.3}");
+    assert!(
+        top <= most * (1.0 + SOLVER_TOLERANCE) && top >= 0.95 * least,
+        "top speed {top:.3} mm/s, stops within the window from {most:.3}, within its unkept part from {least:.3}"
+    );
+    assert!(
+        short.time > long.time * 1.2,
+        "2 mm windows {:.5} s, 8 mm windows {:.5} s",
+        short.time,
+        long.time
+    );
+}
+
+/// Windows shorter than the stretches of a program of corners, an arc
+/// and a dense curve: within every limit across the seams, above the
+/// bound, and near the schedule solved whole.
+#[test]
+fn windows_across_corners_keep_the_limits() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -10.0);
+    let (segments, whole) = solved(&corners_arc_and_curve(), kins, start);
+    let config = ScheduleConfig {
+        window: Some(Window {
+            horizon: 300,
+            commit: 75,
+        }),
+        ..config()
+    };
+    let windowed = schedule(&segments, kins, config).unwrap();
+    assert!(windowed.windows > 4, "{} windows", windowed.windows);
+    let used = windowed.limit_use(kins).unwrap();
+    assert!(used.slowdown() <= 1.0 + SOLVER_TOLERANCE, "{used:?}");
+    let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
+    eprintln!(
+        "in windows {:.5} s, whole {:.5} s, bound {bound:.5} s",
+        windowed.time, whole.time
+    );
+    assert!(windowed.time >= bound);
+    assert!(
+        windowed.time <= 1.02 * whole.time,
+        "in windows {:.5} s, whole {:.5} s",
+        windowed.time,
+        whole.time
     );
 }
 
@@ -185,8 +310,8 @@ fn arcs_in_every_plane_and_a_dwell() {
                  G18 G3 X65 Z-14 I0 K5\n\
                  G19 G2 Y60 Z-9 J5 K0\n\
                  G0 X50 Y50 Z-20\n";
-    // Coarser still: clarabel's generic code is compiled in this crate,
-    // unoptimised in the test build, and these moves are long.
+    // Coarser still: these moves are long, and the test build is
+    // unoptimised.
     let coarse = ScheduleConfig {
         ds: 0.05,
         passes: 3,

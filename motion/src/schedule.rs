@@ -84,8 +84,27 @@ pub struct ScheduleConfig {
     /// Servo period, s: the planner's caps at curvature jumps and kinks.
     pub period: f64,
     /// Linear programs per stretch (the first from a guess, each next one
-    /// linearised about the last solution).
+    /// linearised about the last solution), or per window.
     pub passes: usize,
+    /// Solve each stretch whole (`None`), or in windows that run ahead
+    /// of the motion as an online planner's would.
+    pub window: Option<Window>,
+}
+
+/// Solving a stretch in windows, as a planner that runs ahead of the
+/// motion must: each window's linear programs see only its own nodes,
+/// start from the speed and acceleration the windows before committed,
+/// and end at rest, so the schedule always has a way to rest within what
+/// has been solved. Of each window's solution the first `commit` nodes
+/// are kept; the next window starts two nodes before the first node not
+/// kept (those two fix its speed and acceleration).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    /// Nodes per window (at 0.01 mm, 100 per millimetre of path).
+    pub horizon: usize,
+    /// Nodes kept of each window's solution: at least 3, less than
+    /// `horizon`.
+    pub commit: usize,
 }
 
 impl Default for ScheduleConfig {
@@ -94,6 +113,7 @@ impl Default for ScheduleConfig {
             ds: 0.01,
             period: 0.001,
             passes: 6,
+            window: None,
         }
     }
 }
@@ -155,6 +175,8 @@ pub struct Schedule {
     pub step: Vec<f64>,
     /// Stretches between stops.
     pub stretches: usize,
+    /// Windows solved (0 when each stretch is solved whole).
+    pub windows: usize,
     /// Linear programs solved, and those the solver gave up on (the
     /// stretch keeps its best earlier solution; a stretch with none
     /// stands still and makes `time` infinite).
@@ -366,6 +388,7 @@ impl Sampler {
             v: vec![0.0; n],
             step: vec![0.0; n],
             stretches: 0,
+            windows: 0,
             solves: 0,
             failed: 0,
             nodes: Vec::new(),
@@ -403,9 +426,120 @@ impl Sampler {
         out
     }
 
-    /// x at every node of one stretch (from rest to rest): the best of
-    /// the passes by cycle time.
+    /// x at every node of one stretch (from rest to rest).
     fn stretch(&self, nodes: &[Node], out: &mut Schedule) -> Vec<f64> {
+        match self.config.window {
+            Some(window) if nodes.len() > window.horizon + 1 => self.windowed(nodes, window, out),
+            _ => {
+                let guess = self.first_guess(nodes, Start::Rest, None);
+                self.passes(nodes, Start::Rest, guess, out)
+                    .unwrap_or_else(|| vec![0.0; nodes.len()])
+            }
+        }
+    }
+
+    /// One stretch window by window (see [`Window`]).
+    fn windowed(&self, nodes: &[Node], window: Window, out: &mut Schedule) -> Vec<f64> {
+        let m = nodes.len();
+        let commit = window.commit.clamp(3, window.horizon.max(4) - 1);
+        let mut x = vec![0.0; m];
+        // The window starts at node `begin`, in state `from`.
+        let (mut begin, mut from) = (0, Start::Rest);
+        // The last window solved: its first node and its solution, which
+        // ends at rest.
+        let mut last: Option<(usize, Vec<f64>)> = None;
+        loop {
+            let end = (begin + window.horizon).min(m - 1);
+            let span = &nodes[begin..=end];
+            out.windows += 1;
+            let guess = self.first_guess(
+                span,
+                from,
+                last.as_ref().map(|(at, sol)| &sol[begin - at..]),
+            );
+            let mut solved = self.passes(span, from, guess, out);
+            if solved.is_none() {
+                // The first guess can linearise the jerk limit more
+                // tightly than the window before did, so tightly that the
+                // committed state has no continuation. Linearised about
+                // that window's own solution (at rest past its end), the
+                // rows hold that solution: the program is feasible.
+                if let Some((at, sol)) = &last {
+                    let mut guess = vec![0.0; span.len()];
+                    let before = &sol[begin - at..];
+                    guess[..before.len()].copy_from_slice(before);
+                    solved = self.passes(span, from, guess, out);
+                }
+            }
+            match solved {
+                Some(sol) if end == m - 1 => {
+                    x[begin..].copy_from_slice(&sol);
+                    return x;
+                }
+                Some(sol) => {
+                    let keep = begin + commit;
+                    x[begin..keep].copy_from_slice(&sol[..commit]);
+                    last = Some((begin, sol));
+                    begin = keep - 2;
+                    from = Start::Moving([x[begin], x[begin + 1]]);
+                }
+                None => {
+                    // Nothing within the limits from the committed state:
+                    // follow the last window's solution to its rest, as a
+                    // planner that runs ahead would, and start again from
+                    // there. With no such solution (the first window, or
+                    // one from rest), the stretch stands still, as a
+                    // stretch solved whole does.
+                    let Some((at, sol)) = last.take() else {
+                        x[begin..].fill(0.0);
+                        return x;
+                    };
+                    let rest = at + sol.len() - 1;
+                    x[begin..=rest].copy_from_slice(&sol[begin - at..]);
+                    if rest == m - 1 {
+                        return x;
+                    }
+                    begin = rest;
+                    from = Start::Rest;
+                }
+            }
+        }
+    }
+
+    /// The first linearisation point: half of what the acceleration
+    /// limits alone allow (the jerk-limited schedule is slower; a guess
+    /// above it puts the first tangents where they bind hardest), or
+    /// where the window before solved these nodes, the solution it found
+    /// if that is higher. Not lower: that solution brakes to rest at its
+    /// end, and a pass can raise x at most threefold over its guess (the
+    /// tangent of 1/√x at x̄ reaches zero at 3x̄), so from there it would
+    /// take many passes to climb back.
+    fn first_guess(&self, nodes: &[Node], from: Start, before: Option<&[f64]>) -> Vec<f64> {
+        let mut guess = self.second_order(nodes, from);
+        for x in guess.iter_mut() {
+            *x *= 0.5;
+        }
+        if let Some(before) = before {
+            for (guess, &before) in guess.iter_mut().zip(before) {
+                *guess = guess.max(before);
+            }
+        }
+        if let Start::Moving(fixed) = from {
+            guess[..2].copy_from_slice(&fixed);
+        }
+        guess
+    }
+
+    /// x at every node of `nodes` (ending at rest, starting at `from`):
+    /// the best by time of the passes from `guess`, or `None` when the
+    /// solver gave up on every one.
+    fn passes(
+        &self,
+        nodes: &[Node],
+        from: Start,
+        mut guess: Vec<f64>,
+        out: &mut Schedule,
+    ) -> Option<Vec<f64>> {
         let m = nodes.len();
         let time = |x: &[f64]| -> f64 {
             (0..m - 1)
@@ -413,45 +547,41 @@ impl Sampler {
                 .map(|k| interval_time(nodes[k].h, x[k].max(0.0).sqrt(), x[k + 1].max(0.0).sqrt()))
                 .sum()
         };
-        // The first guess: half of what the acceleration limits alone
-        // allow (the jerk-limited schedule is slower; a guess above it
-        // puts the first tangents where they bind hardest).
-        let mut guess = self.second_order(nodes);
-        for x in guess.iter_mut() {
-            *x *= 0.5;
-        }
-        let (mut best, mut best_time) = (vec![0.0; m], f64::INFINITY);
+        let mut best: Option<(Vec<f64>, f64)> = None;
         let mut retries = 0;
         let mut pass = 0;
         while pass < self.config.passes {
             out.solves += 1;
-            let Some(x) = self.linear_program(nodes, &guess) else {
+            let Some(x) = self.linear_program(nodes, &guess, from) else {
                 out.failed += 1;
                 // The solver gave up (numerically): from a lower guess,
                 // whose tangents are steeper, while nothing was found;
                 // else keep the best found.
-                if best_time.is_finite() || retries == RETRIES {
+                if best.is_some() || retries == RETRIES {
                     break;
                 }
                 retries += 1;
                 for x in guess.iter_mut() {
                     *x *= 0.25;
                 }
+                if let Start::Moving(fixed) = from {
+                    guess[..2].copy_from_slice(&fixed);
+                }
                 continue;
             };
             pass += 1;
             let t = time(&x);
-            if t < best_time {
-                best_time = t;
-                best.clone_from(&x);
+            if best.as_ref().is_none_or(|(_, best)| t < *best) {
+                best = Some((x.clone(), t));
             }
             guess = x;
         }
-        best
+        best.map(|(x, _)| x)
     }
 
-    /// Forward and backward passes under the acceleration limits alone.
-    fn second_order(&self, nodes: &[Node]) -> Vec<f64> {
+    /// Forward and backward passes under the acceleration limits alone,
+    /// from `from`.
+    fn second_order(&self, nodes: &[Node], from: Start) -> Vec<f64> {
         let mut x: Vec<f64> = nodes.iter().map(|n| n.xmax).collect();
         let most = |g: &Geometry, x: f64| {
             let mut u = f64::INFINITY;
@@ -463,7 +593,10 @@ impl Sampler {
             u.max(0.0)
         };
         let m = nodes.len();
-        x[0] = 0.0;
+        match from {
+            Start::Rest => x[0] = 0.0,
+            Start::Moving(fixed) => x[..2].copy_from_slice(&fixed),
+        }
         x[m - 1] = 0.0;
         for k in 0..m - 1 {
             let u = most(&nodes[k].right, x[k]);
@@ -479,15 +612,23 @@ impl Sampler {
     /// One linear program: the velocity, acceleration and (linearised
     /// about `guess`) jerk limits, the cycle time's first-order change
     /// about `guess` as objective. `None` when the solver gives up.
-    fn linear_program(&self, nodes: &[Node], guess: &[f64]) -> Option<Vec<f64>> {
+    fn linear_program(&self, nodes: &[Node], guess: &[f64], from: Start) -> Option<Vec<f64>> {
         let m = nodes.len();
         let (a_max, j_max) = (&self.limits.a, &self.limits.j);
         // The stops are at rest: held at zero rather than bounded both
-        // ways, which would leave the program no interior.
+        // ways, which would leave the program no interior. A moving start
+        // is held too, its values moved into the rows' bounds.
         let mut lp = BandedLp::new(m);
         lp.fix_zero(0);
         lp.fix_zero(m - 1);
-        let mut rows = Rows(lp);
+        let fixed = match from {
+            Start::Rest => None,
+            Start::Moving(fixed) => {
+                lp.fix_zero(1);
+                Some(fixed)
+            }
+        };
+        let mut rows = Rows { lp, fixed };
         for (k, node) in nodes.iter().enumerate().take(m - 1).skip(1) {
             // An infinite cap is no row.
             rows.push(&[(k, 1.0)], node.xmax);
@@ -507,7 +648,11 @@ impl Sampler {
                 .fold(f64::INFINITY, f64::min);
             jp.powf(2.0 / 3.0) * 6f64.powf(4.0 / 3.0) / 4.0
         };
-        let (c_start, c_end) = (rest_cap(&nodes[0].right), rest_cap(&nodes[m - 1].left));
+        let c_start = match from {
+            Start::Rest => rest_cap(&nodes[0].right),
+            Start::Moving(_) => f64::INFINITY,
+        };
+        let c_end = rest_cap(&nodes[m - 1].left);
         let (mut from_start, mut from_end) = (0.0, 0.0);
         for k in 1..m - 1 {
             from_start += nodes[k - 1].h;
@@ -615,7 +760,9 @@ impl Sampler {
         for x in x.iter_mut() {
             *x = x.max(0.0);
         }
-        x[0] = 0.0;
+        if let Some(fixed) = fixed {
+            x[..2].copy_from_slice(&fixed);
+        }
         x[m - 1] = 0.0;
         Some(x)
     }
@@ -632,19 +779,52 @@ fn interval_time(h: f64, v0: f64, v1: f64) -> f64 {
     }
 }
 
+/// Where a stretch or a window starts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Start {
+    /// At rest (x = 0 at the first node).
+    Rest,
+    /// Moving, with x at the first two nodes fixed by the window before.
+    Moving([f64; 2]),
+}
+
 /// Constraint rows a·x ≤ b, built row by row, each within three
 /// neighbouring nodes.
-struct Rows(BandedLp);
+struct Rows {
+    lp: BandedLp,
+    /// x at columns 0 and 1, when fixed by the window before: their terms
+    /// move into the bound, and a row with nothing else, already kept by
+    /// that window, is dropped.
+    fixed: Option<[f64; 2]>,
+}
 
 impl Rows {
     fn push(&mut self, terms: &[(usize, f64)], bound: f64) {
+        let banded = match self.fixed {
+            None => self.lp.push(terms, bound),
+            Some(fixed) => {
+                let mut free = [(0, 0.0); 4];
+                let (mut n, mut bound) = (0, bound);
+                for &(column, value) in terms {
+                    if column < 2 {
+                        bound -= value * fixed[column];
+                    } else {
+                        free[n] = (column, value);
+                        n += 1;
+                    }
+                }
+                if n == 0 {
+                    return;
+                }
+                self.lp.push(&free[..n], bound)
+            }
+        };
         // Every row this module builds spans a node and its neighbours.
-        let banded = self.0.push(terms, bound);
         debug_assert!(banded.is_ok(), "a row beyond three neighbouring nodes");
     }
 
     fn solve(&self, objective: &[f64], scale: f64) -> Result<Vec<f64>, Failure> {
-        self.0.solve(objective, scale)
+        self.lp.solve(objective, scale)
     }
 }
 
