@@ -14,7 +14,9 @@
 //! HORIZON [COMMIT]` solves the stretches in windows of HORIZON nodes,
 //! keeping COMMIT of each (default a quarter), as a planner that runs
 //! ahead of the motion must (`kerf_motion::schedule::Window`); about
-//! 100 s at `2000 6 2000 500`.
+//! 100 s at `2000 6 2000 500`. A fifth number N spaces each segment's
+//! nodes by its top speed, N per servo period
+//! (`ScheduleConfig::nodes_per_period`; HORIZON 0 for no windows).
 
 #[path = "programs.rs"]
 mod programs;
@@ -27,7 +29,15 @@ use kerf_motion::offline::{self, plan_program, RunConfig};
 use kerf_motion::schedule::{schedule, ScheduleConfig, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig};
 
-fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize, window: Option<Window>) {
+/// How the bench's schedules are solved (the command's numbers).
+#[derive(Clone, Copy)]
+struct Solve {
+    passes: usize,
+    window: Option<Window>,
+    nodes_per_period: Option<f64>,
+}
+
+fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: Solve) {
     let planner = PlannerConfig {
         mode: PathMode::Blend { tolerance: 0.01 },
         ..PlannerConfig::default()
@@ -47,16 +57,20 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize, window: 
     let t0 = Instant::now();
     let config = ScheduleConfig {
         period: planner.period,
-        passes,
-        window,
+        passes: solve.passes,
+        window: solve.window,
+        nodes_per_period: solve.nodes_per_period,
         ..ScheduleConfig::default()
     };
     let found = schedule(&segments, kins, config).expect("mill3 has trivial kinematics");
     let wall = t0.elapsed().as_secs_f64();
     let used = found.limit_use(kins).expect("mill3 has trivial kinematics");
     let time = found.scaled_time(&used);
+    let followed = found
+        .sampled(&segments, kins, planner.period)
+        .expect("mill3 has trivial kinematics");
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3}",
         executor / bound,
         time / bound,
         executor / time,
@@ -66,7 +80,10 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, passes: usize, window: 
         found.v.len(),
         found.stretches,
         found.failed,
-        found.windows,
+        format!("{}/{}", found.windows, found.window_rests),
+        followed.limits.velocity,
+        followed.limits.acceleration,
+        followed.limits.jerk,
     );
 }
 
@@ -78,15 +95,24 @@ fn main() {
     let lines = numbers.first().copied().unwrap_or(2000);
     let passes = numbers.get(1).copied().unwrap_or(6);
     let window = match (numbers.get(2), numbers.get(3)) {
-        (Some(&horizon), Some(&commit)) => Some(Window { horizon, commit }),
-        (Some(&horizon), None) => Some(Window {
+        (Some(&horizon), Some(&commit)) if horizon > 0 => Some(Window { horizon, commit }),
+        (Some(&horizon), None) if horizon > 0 => Some(Window {
             horizon,
             commit: horizon / 4,
         }),
         _ => None,
     };
+    let nodes_per_period = numbers.get(4).map(|&n| n as f64);
+    let solve = Solve {
+        passes,
+        window,
+        nodes_per_period,
+    };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
+    if let Some(n) = nodes_per_period {
+        println!("nodes spaced by each segment's top speed, {n} per servo period, at least 0.01 mm apart");
+    }
     match window {
         None => println!(
             "machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes, each stretch whole"
@@ -97,7 +123,7 @@ fn main() {
         ),
     }
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6}",
         "program",
         "executor",
         "bound",
@@ -112,21 +138,22 @@ fn main() {
         "stops",
         "bad",
         "win",
-        "solve"
+        "solve",
+        "v@T",
+        "a@T",
+        "j@T"
     );
     row(
         "circle R20, 0.05 mm chords",
         &programs::circle_small_segments(),
         kins,
-        passes,
-        window,
+        solve,
     );
     row(
         "zig-zag pocket 60x40",
         &programs::zigzag_pocket(),
         kins,
-        passes,
-        window,
+        solve,
     );
     match programs::stellabee() {
         Some(text) => {
@@ -136,8 +163,7 @@ fn main() {
                 &format!("stellabee1.ngc, {lines} lines"),
                 &head.join("\n"),
                 kins,
-                passes,
-                window,
+                solve,
             );
         }
         None => println!("stellabee1.ngc: ../shared/conformance not found, skipped"),
@@ -148,5 +174,7 @@ fn main() {
     );
     println!("(schedule times are slowed by any excess, the solver's tolerance, up to 1e-5)");
     println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on;");
-    println!("win: windows solved (0: each stretch whole)");
+    println!("win: windows solved / windows with no solution, followed by the one before to rest (0/0: each stretch whole)");
+    println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period, its speed");
+    println!("  linear in v² between nodes (Schedule::sampled): what an executor following it naively would use");
 }

@@ -210,6 +210,7 @@ fn windows_cap_the_speed_at_what_stops_within_them() {
         let found = schedule(&segments, kins, config).unwrap();
         assert_eq!(found.failed, 0, "every linear program solved");
         assert!(found.windows > 1, "solved in {} windows", found.windows);
+        assert_eq!(found.window_rests, 0, "every window solved");
         let used = found.limit_use(kins).unwrap();
         assert!(
             used.slowdown() <= 1.0 + SOLVER_TOLERANCE,
@@ -281,6 +282,71 @@ fn windows_across_corners_keep_the_limits() {
         windowed.time,
         whole.time
     );
+}
+
+/// Followed in time and sampled every servo period, as an executor would
+/// move the axes, a line's schedule cruises at the feed and accelerates
+/// at the limit, as its nodes say; each sample is a point on the line,
+/// the last at its end.
+#[test]
+fn a_schedule_followed_in_time_moves_as_its_nodes_say() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let (segments, schedule) = solved("G21 G90 G1 F6000 X22\nM2\n", kins, start);
+    let followed = schedule.sampled(&segments, kins, 0.001).unwrap();
+    let used = followed.limits;
+    eprintln!("sampled {used:?}, {:.5} s", followed.time);
+    // F6000 is 100 mm/s of mill3's 150 on X; 1500 mm/s² its limit.
+    assert!((used.velocity - 100.0 / 150.0).abs() < 1e-6, "{used:?}");
+    assert!((used.acceleration - 1.0).abs() < 1e-3, "{used:?}");
+    // Time: within a period of the S-curve's, as the nodes' is.
+    let exact = s_curve_time(12.0, 100.0, 1500.0, 75_000.0);
+    assert!(
+        followed.time >= exact && followed.time < 1.03 * exact,
+        "followed {:.5} s, S-curve {exact:.5} s",
+        followed.time
+    );
+}
+
+/// Nodes spaced by speed: two per servo period at F6000 (100 mm/s, so
+/// 0.05 mm apart) on a line, a rapid at mill3's 150 mm/s on X (0.075 mm),
+/// and never closer than `ds`: fewer nodes, the same limits, the S-curve's
+/// time within the discretisation's few per cent.
+#[test]
+fn nodes_spaced_by_speed_keep_the_limits() {
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let spaced = ScheduleConfig {
+        nodes_per_period: Some(2.0),
+        ..config()
+    };
+    for (program, top, len, spacing) in [
+        ("G21 G90 G1 F6000 X22\nM2\n", 100.0, 12.0, 0.05),
+        ("G21 G90 G0 X22\nM2\n", 150.0, 12.0, 0.075),
+        ("G21 G90 G1 F300 X22\nM2\n", 5.0, 12.0, config().ds),
+    ] {
+        let (_, found) = solved_with(program, kins, start, spaced);
+        let intervals = len / spacing;
+        assert!(
+            (found.v.len() as f64 - 1.0 - intervals).abs() <= 1.0,
+            "{program}: {} nodes, {intervals} intervals of {spacing} mm",
+            found.v.len()
+        );
+        let used = found.limit_use(kins).unwrap();
+        assert!(
+            used.slowdown() <= 1.0 + SOLVER_TOLERANCE,
+            "{program}: {used:?}"
+        );
+        let exact = s_curve_time(len, top, 1500.0, 75_000.0);
+        let ratio = found.time / exact;
+        assert!(
+            (0.995..1.03).contains(&ratio),
+            "{program}: {:.5} s against the S-curve's {exact:.5} s",
+            found.time
+        );
+    }
 }
 
 /// A parallel machine's joints are not modelled: refused by name, not
