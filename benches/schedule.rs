@@ -70,7 +70,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: Solve) {
         .sampled(&segments, kins, planner.period)
         .expect("mill3 has trivial kinematics");
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3}",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}",
         executor / bound,
         time / bound,
         executor / time,
@@ -84,6 +84,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: Solve) {
         followed.limits.velocity,
         followed.limits.acceleration,
         followed.limits.jerk,
+        followed.jerk_in_motion,
     );
 }
 
@@ -123,7 +124,7 @@ fn main() {
         ),
     }
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}",
         "program",
         "executor",
         "bound",
@@ -141,7 +142,8 @@ fn main() {
         "solve",
         "v@T",
         "a@T",
-        "j@T"
+        "j@T",
+        "moving"
     );
     row(
         "circle R20, 0.05 mm chords",
@@ -175,6 +177,6 @@ fn main() {
     println!("(schedule times are slowed by any excess, the solver's tolerance, up to 1e-5)");
     println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on;");
     println!("win: windows solved / windows with no solution, followed by the one before to rest (0/0: each stretch whole)");
-    println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period, its speed");
-    println!("  linear in v² between nodes (Schedule::sampled): what an executor following it naively would use");
+    println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period, a quintic");
+    println!("  in time between nodes (Schedule::sampled); moving: the jerk away from stops, where the nodes' jerk rows hold");
 }

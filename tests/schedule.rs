@@ -286,8 +286,9 @@ fn windows_across_corners_keep_the_limits() {
 
 /// Followed in time and sampled every servo period, as an executor would
 /// move the axes, a line's schedule cruises at the feed and accelerates
-/// at the limit, as its nodes say; each sample is a point on the line,
-/// the last at its end.
+/// at the limit, as its nodes say, and away from the stops its jerk is
+/// within the limit too: on a line the schedule's jerk rows are the
+/// S-curve's, and the quintic between nodes keeps to them.
 #[test]
 fn a_schedule_followed_in_time_moves_as_its_nodes_say() {
     let machine = kerf_machines::load("mill3").unwrap();
@@ -300,6 +301,11 @@ fn a_schedule_followed_in_time_moves_as_its_nodes_say() {
     // F6000 is 100 mm/s of mill3's 150 on X; 1500 mm/s² its limit.
     assert!((used.velocity - 100.0 / 150.0).abs() < 1e-6, "{used:?}");
     assert!((used.acceleration - 1.0).abs() < 1e-3, "{used:?}");
+    assert!(
+        followed.jerk_in_motion > 0.99 && followed.jerk_in_motion <= 1.0 + 1e-3,
+        "jerk away from the stops {}",
+        followed.jerk_in_motion
+    );
     // Time: within a period of the S-curve's, as the nodes' is.
     let exact = s_curve_time(12.0, 100.0, 1500.0, 75_000.0);
     assert!(

@@ -882,23 +882,26 @@ pub struct Sampled {
     /// Largest axis velocity, acceleration and jerk use, by finite
     /// differences of the sampled positions.
     pub limits: ScheduleUse,
+    /// The largest jerk use at samples more than [`REST_NODES`] nodes
+    /// from a stop, where the schedule's own jerk rows hold (next to a
+    /// stop it caps the speed by the ramp out of rest instead).
+    pub jerk_in_motion: f64,
 }
 
-/// Where along an interval from `v0` to `v1` over `h` the motion is
-/// `tau` into it, and the interval's duration, as [`interval_time`]
-/// counts it: constant path acceleration between moving nodes; out of or
-/// into rest, constant path jerk, s ∝ t³.
-fn interval_position(h: f64, v0: f64, v1: f64, tau: f64) -> f64 {
-    match (v0 > 0.0, v1 > 0.0) {
-        (true, true) => {
-            let u = (v1 * v1 - v0 * v0) / (2.0 * h);
-            (v0 * tau + 0.5 * u * tau * tau).clamp(0.0, h)
-        }
-        (false, true) => h * (tau * v1 / (3.0 * h)).min(1.0).powi(3),
-        (true, false) => h - h * (1.0 - tau * v0 / (3.0 * h)).max(0.0).powi(3),
-        (false, false) => 0.0,
-    }
+/// The path position `t` into an interval of duration `d` from (speed
+/// `v0`, path acceleration `a0`) to (`v1`, `a1`) over `h`: the quintic
+/// that meets position, speed and acceleration at both ends (the
+/// minimum-jerk interpolant), so that position, speed and acceleration
+/// are continuous across nodes and the path jerk is finite.
+fn quintic_position(h: f64, d: f64, [v0, a0]: [f64; 2], [v1, a1]: [f64; 2], t: f64) -> f64 {
+    let (d2, d3) = (d * d, d * d * d);
+    let c3 = (20.0 * h - (8.0 * v1 + 12.0 * v0) * d - (3.0 * a0 - a1) * d2) / (2.0 * d3);
+    let c4 =
+        (-30.0 * h + (14.0 * v1 + 16.0 * v0) * d + (3.0 * a0 - 2.0 * a1) * d2) / (2.0 * d3 * d);
+    let c5 = (12.0 * h - 6.0 * (v1 + v0) * d - (a0 - a1) * d2) / (2.0 * d3 * d2);
+    (t * (v0 + t * (0.5 * a0 + t * (c3 + t * (c4 + t * c5))))).clamp(0.0, h)
 }
+
 impl Schedule {
     /// Motion time (without dwells), s.
     fn motion_time(&self) -> f64 {
@@ -911,14 +914,22 @@ impl Schedule {
         self.motion_time() * use_.slowdown() + self.dwell
     }
 
-    /// The schedule followed in time, its speed interpolated between
-    /// the nodes as [`interval_position`] does, positions taken on
-    /// `segments` (those it was made from) every `period`, s, and every
-    /// axis's velocity, acceleration and jerk measured on them by finite
+    /// The schedule followed in time, positions taken on `segments`
+    /// (those it was made from) every `period`, s, and every axis's
+    /// velocity, acceleration and jerk measured on them by finite
     /// differences against its limits, as `kerf plan` measures the
-    /// executor. The machine is at rest before and after. What the
-    /// nodes' limits leave between them, and what one servo period makes
-    /// of the steps of path acceleration at the nodes, shows here.
+    /// executor. The machine is at rest before and after.
+    ///
+    /// Between nodes the motion is the quintic in time that meets both
+    /// nodes' position, speed and path acceleration ([`quintic_position`];
+    /// the acceleration at a node is the schedule's centred u, zero at
+    /// rest), each interval lasting as [`interval_time`] counts it. So the
+    /// motion passes every node at its time and speed, and what the
+    /// nodes' limits leave between them shows here. (With the speed
+    /// linear in v² between nodes instead, constant acceleration, each
+    /// node's step of acceleration falls inside one period wherever an
+    /// interval lasts longer than one, and the jerk read up to 4.5 times
+    /// its limit.)
     pub fn sampled(
         &self,
         segments: &[Segment],
@@ -927,19 +938,44 @@ impl Schedule {
     ) -> Result<Sampled, ScheduleError> {
         let limits = axis_limits(kins)?;
         let nodes = &self.nodes;
+        let n = nodes.len();
         let mut out = Sampled::default();
         let Some(first) = nodes.first() else {
             return Ok(out);
         };
+        let x: Vec<f64> = self.v.iter().map(|v| v * v).collect();
+        let slope = |k: usize| (x[k + 1] - x[k]) / (2.0 * nodes[k].h);
+        let accel: Vec<f64> = (0..n)
+            .map(|k| {
+                let before = (k > 0 && nodes[k - 1].h > 0.0).then(|| slope(k - 1));
+                let after = (k + 1 < n && nodes[k].h > 0.0).then(|| slope(k));
+                match (x[k] > 0.0, before, after) {
+                    (false, _, _) => 0.0,
+                    (true, Some(b), Some(a)) => 0.5 * (a + b),
+                    (true, Some(u), None) | (true, None, Some(u)) => u,
+                    (true, None, None) => 0.0,
+                }
+            })
+            .collect();
+        // Nodes from the nearest stop, counted both ways.
+        let mut from_rest = vec![usize::MAX; n];
+        for order in [false, true] {
+            let mut count = usize::MAX;
+            for i in 0..n {
+                let k = if order { n - 1 - i } else { i };
+                count = if x[k] == 0.0 {
+                    0
+                } else {
+                    count.saturating_add(1)
+                };
+                from_rest[k] = from_rest[k].min(count);
+            }
+        }
         let start = segments[first.segment].shape.point(first.at);
         // The last three samples, newest first.
         let mut last = [start; 3];
-        let mut see = |p: Vec9, out: &mut Sampled| {
+        let mut see = |p: Vec9, in_motion: bool, out: &mut Sampled| {
             for i in 0..9 {
-                if !limits.v[i].is_finite() && !limits.a[i].is_finite() && !limits.j[i].is_finite()
-                {
-                    continue;
-                }
                 let [p1, p2, p3] = [last[0][i], last[1][i], last[2][i]];
                 let v = (p[i] - p1) / period;
                 let a = (p[i] - 2.0 * p1 + p2) / (period * period);
@@ -948,12 +984,16 @@ impl Schedule {
                 u.velocity = u.velocity.max(v.abs() / limits.v[i]);
                 u.acceleration = u.acceleration.max(a.abs() / limits.a[i]);
                 u.jerk = u.jerk.max(j.abs() / limits.j[i]);
+                if in_motion {
+                    out.jerk_in_motion = out.jerk_in_motion.max(j.abs() / limits.j[i]);
+                }
             }
             last = [p, last[0], last[1]];
         };
-        // Time at the start of the interval, and of the next sample.
-        let (mut begun, mut samples) = (0.0, 1u64);
-        for k in 0..nodes.len().saturating_sub(1) {
+        // Time at the start of the interval, and of the next sample;
+        // samples in a row taken in motion.
+        let (mut begun, mut samples, mut run) = (0.0, 1u64, 0);
+        for k in 0..n.saturating_sub(1) {
             let h = nodes[k].h;
             if h == 0.0 {
                 continue;
@@ -967,22 +1007,23 @@ impl Schedule {
             }
             let segment = &segments[nodes[k + 1].segment];
             let base = nodes[k + 1].at - h;
+            let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
             while samples as f64 * period <= begun + lasts {
-                let tau = samples as f64 * period - begun;
-                let p = segment
-                    .shape
-                    .point(base + interval_position(h, v0, v1, tau));
-                see(p, &mut out);
+                let t = samples as f64 * period - begun;
+                let ds = quintic_position(h, lasts, [v0, accel[k]], [v1, accel[k + 1]], t);
+                // A sample's jerk spans it and the three before.
+                run = if in_motion { run + 1 } else { 0 };
+                see(segment.shape.point(base + ds), run >= 4, &mut out);
                 samples += 1;
             }
             begun += lasts;
         }
         out.time = begun;
         // At rest at the end.
-        let end = &nodes[nodes.len() - 1];
+        let end = &nodes[n - 1];
         let end = segments[end.segment].shape.point(end.at);
         for _ in 0..3 {
-            see(end, &mut out);
+            see(end, false, &mut out);
         }
         Ok(out)
     }
