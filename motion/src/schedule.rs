@@ -491,8 +491,11 @@ impl Sampler {
                 // The first guess can linearise the jerk limit more
                 // tightly than the window before did, so tightly that the
                 // committed state has no continuation. Linearised about
-                // that window's own solution (at rest past its end), the
-                // rows hold that solution: the program is feasible.
+                // that window's own solution (at rest past its end), every
+                // row that window had holds that solution again (each
+                // jerk row's tangent now touches 1/√x there); only the
+                // jerk rows at its end node are new, loose at the guess's
+                // floor but not proven to hold.
                 if let Some((at, sol)) = &last {
                     let mut guess = vec![0.0; span.len()];
                     let before = &sol[begin - at..];
