@@ -111,18 +111,20 @@ fn main() {
     };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    if let Some(n) = nodes_per_period {
-        println!("nodes spaced by each segment's top speed, {n} per servo period, at least 0.01 mm apart");
-    }
-    match window {
-        None => println!(
-            "machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes, each stretch whole"
-        ),
-        Some(w) => println!(
-            "machine mill3, G64 P0.01, servo period 1 ms, schedule nodes every 0.01 mm, {passes} passes per window of {} nodes, {} kept of each",
+    let nodes = match nodes_per_period {
+        None => "every 0.01 mm".to_string(),
+        Some(n) => {
+            format!("{n} per servo period at each segment's top speed, at least 0.01 mm apart")
+        }
+    };
+    let solved = match window {
+        None => format!("{passes} passes per stretch, each stretch whole"),
+        Some(w) => format!(
+            "{passes} passes per window of {} nodes, {} kept of each",
             w.horizon, w.commit
         ),
-    }
+    };
+    println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}");
     println!(
         "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}",
         "program",

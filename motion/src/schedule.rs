@@ -107,7 +107,7 @@ pub struct Window {
     /// Nodes per window (at 0.01 mm, 100 per millimetre of path).
     pub horizon: usize,
     /// Nodes kept of each window's solution: at least 3, less than
-    /// `horizon`.
+    /// `horizon` (clamped into that range).
     pub commit: usize,
 }
 
@@ -879,8 +879,8 @@ impl Rows {
 /// executor following it would move the axes: see [`Schedule::sampled`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sampled {
-    /// Motion time, s (dwells left out), to the sample where the path
-    /// ends.
+    /// Motion time, s (dwells left out): the nodes' own, which the
+    /// playback keeps (each interval lasts as [`interval_time`] counts).
     pub time: f64,
     /// Largest axis velocity, acceleration and jerk use, by finite
     /// differences of the sampled positions.
