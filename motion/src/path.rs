@@ -585,31 +585,23 @@ impl Blend {
             let ds = h / 2.0 * (speed[k] + speed[k + 1]) + h * h / 12.0 * (along[k] - along[k + 1]);
             inv_ds[k] = if ds > 0.0 { 1.0 / ds } else { 0.0 };
         }
-        // Plain comparisons rather than f64::max, whose NaN rules cost
-        // more (no NaN here).
-        let larger = |m: f64, x: f64| if x > m { x } else { m };
         let mut out = BlendExtremes {
             tangent: [0.0; 3],
             curvature: [0.0; 3],
             curvature_rate: [0.0; 3],
         };
         for i in 0..3 {
-            let (t, c) = (&tangent[i], &curvature[i]);
-            let (mut tm, mut km, mut rm) = (t[0].abs(), c[0].abs(), 0.0);
-            for k in 0..SAMPLES {
-                tm = larger(tm, t[k + 1].abs());
-                km = larger(km, c[k + 1].abs());
-                rm = larger(rm, (c[k + 1] - c[k]).abs() * inv_ds[k]);
-            }
-            (out.tangent[i], out.curvature[i], out.curvature_rate[i]) = (tm, km, rm);
+            out.tangent[i] = largest(&tangent[i].map(f64::abs));
+            out.curvature[i] = largest(&curvature[i].map(f64::abs));
         }
         // dκ_i/ds exactly at twice as many parameters, and between them at
         // most the larger neighbour plus an allowance for a crest: a
         // parabola through three neighbours rises above its samples by at
         // most an eighth of their second difference, taken twice over.
-        // Never below the differences above (means over the intervals)
-        // with the 25 % the planner used to add to them alone, so that
-        // plans change only where those missed a crest.
+        // Never below the largest difference of the curvature over an
+        // interval's arc length (its mean over the interval) with the 25 %
+        // the planner used to add to those alone, so that plans change
+        // only where those missed a crest.
         //
         // Only on corners turned by more than 60°: on gentler ones (dense
         // curves, where planning speed matters most) the means and the
@@ -670,8 +662,15 @@ impl Blend {
                 }
             }
             for i in 0..3 {
-                let floor = 1.25 * out.curvature_rate[i];
-                out.curvature_rate[i] = larger(floor, crest_bound(&rate[i], 0.25));
+                let c = &curvature[i];
+                let mut mean = [0.0; SAMPLES];
+                for k in 0..SAMPLES {
+                    mean[k] = (c[k + 1] - c[k]).abs() * inv_ds[k];
+                }
+                let floor = 1.25 * largest(&mean);
+                let exact = crest_bound(&rate[i], 0.25);
+                // Plain comparison rather than f64::max (no NaN here).
+                out.curvature_rate[i] = if exact > floor { exact } else { floor };
             }
         }
         // The table by five-point Gauss–Legendre on each interval: the same
@@ -904,12 +903,31 @@ fn crest_bound<const N: usize>(x: &[f64; N], share: f64) -> f64 {
     }
     second[0] = second[1];
     second[N - 1] = second[N - 2];
-    let mut most = 0.0;
+    let mut bound = [0.0; N];
     for k in 0..N - 1 {
         let crest = larger(second[k], second[k + 1]);
-        most = larger(most, larger(x[k].abs(), x[k + 1].abs()) + share * crest);
+        bound[k] = larger(x[k].abs(), x[k + 1].abs()) + share * crest;
     }
-    most
+    largest(&bound)
+}
+
+/// The largest of `x` and zero (no NaN), in four running maxima a lane
+/// of a vector register each: a maximum does not depend on the order it
+/// is taken in, and one running maximum keeps the loop from vectorising.
+#[inline(always)]
+fn largest<const N: usize>(x: &[f64; N]) -> f64 {
+    let larger = |m: f64, v: f64| if v > m { v } else { m };
+    let mut lanes = [0.0; 4];
+    let mut chunks = x.chunks_exact(4);
+    for chunk in &mut chunks {
+        for l in 0..4 {
+            lanes[l] = larger(lanes[l], chunk[l]);
+        }
+    }
+    for &v in chunks.remainder() {
+        lanes[0] = larger(lanes[0], v);
+    }
+    larger(larger(lanes[0], lanes[1]), larger(lanes[2], lanes[3]))
 }
 
 /// d³p/ds³ from the first three derivatives in the Bézier parameter (see

@@ -1227,6 +1227,8 @@ impl FitWindow {
         let one = _mm256_set1_pd(1.0);
         let sign = _mm256_set1_pd(-0.0);
         let scale = _mm256_set1_pd(scale);
+        let first = _mm256_set_pd(3.0, 2.0, 1.0, 0.0);
+        let used_f = _mm256_set1_pd(used as f64);
         let chunks = used.div_ceil(4);
         let mut moments = [zero; 2 * FIT_TERMS - 1];
         let mut rhs0 = [zero; FIT_TERMS];
@@ -1240,12 +1242,13 @@ impl FitWindow {
                 let u = _mm256_mul_pd(load!(self.x, c), scale);
                 let r = _mm256_min_pd(_mm256_andnot_pd(sign, u), one);
                 let f = _mm256_sub_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), r));
-                let mask: [f64; 4] =
-                    std::array::from_fn(|l| if c * 4 + l < used { 1.0 } else { 0.0 });
-                // SAFETY: `mask` is four readable f64.
-                let mask = unsafe { _mm256_loadu_pd(mask.as_ptr()) };
+                // Slots past `used` weigh +0, as f³·0 does in the plain
+                // sums (f ≥ 0): all bits kept where the slot's index is
+                // below `used`, none elsewhere.
+                let slot = _mm256_add_pd(first, _mm256_set1_pd((c * 4) as f64));
+                let mask = _mm256_cmp_pd::<_CMP_LT_OQ>(slot, used_f);
                 (
-                    _mm256_mul_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask),
+                    _mm256_and_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask),
                     u,
                 )
             }};
