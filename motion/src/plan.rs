@@ -20,7 +20,7 @@ use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 use crate::kinematics::{Kinematics, Limits, LIMIT_SLACK, MAX_JOINTS};
 use crate::merge::{CollinearMerge, MergeContext, Verdict};
 use crate::path::{
-    corner_spread, norm, Arc, Blend, BlendExtremes, Frame, Line, Near, Poly, Shape, Vec9,
+    corner_spread, norm, norm3, Arc, Blend, BlendExtremes, Frame, Line, Near, Poly, Shape, Vec9,
 };
 
 /// What a segment does.
@@ -849,10 +849,6 @@ impl Chord {
             .map(|i| (other.direction[i] - self.direction[i]).powi(2))
             .sum()
     }
-}
-
-fn norm3(v: &[f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// The frame at the midpoint of `chords[at]`, the chord of line `p`, on
