@@ -64,7 +64,14 @@ impl Near {
     /// segment: then, by the convex hull property and the convexity of the
     /// distance to a segment, so is the whole curve piece they control.
     pub(crate) fn hull_within(&self, points: &[[f64; 3]; 6], limit2: f64) -> bool {
-        points.iter().all(|p| self.distance2(p) <= limit2)
+        // All six distances, then the test: without an early exit the
+        // compiler evaluates several points per instruction, and the
+        // answer is the same.
+        let mut inside = [false; 6];
+        for (inside, p) in inside.iter_mut().zip(points) {
+            *inside = self.distance2(p) <= limit2;
+        }
+        inside.iter().all(|&x| x)
     }
 }
 
@@ -903,13 +910,16 @@ impl Sampling {
         // none differs from the next by more than SMOOTH_BEND of it, the
         // quintic is close to a line traced at an even pace, and its
         // tangent, curvature and curvature rate change slowly enough for
-        // a few samples with crest allowances.
-        let mean = norm3(&std::array::from_fn(|i| control[5][i] - control[0][i])) / 5.0;
+        // a few samples with crest allowances. (Squared lengths: no
+        // square roots on every blend.)
+        let square = |v: [f64; 3]| v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        let chord2 = square(std::array::from_fn(|i| control[5][i] - control[0][i]));
+        let allowed2 = SMOOTH_BEND * SMOOTH_BEND * chord2 / 25.0;
         let smooth = (0..4).all(|k| {
             let (a, b) = (step(k), step(k + 1));
-            norm3(&std::array::from_fn(|i| b[i] - a[i])) <= SMOOTH_BEND * mean
+            square(std::array::from_fn(|i| b[i] - a[i])) <= allowed2
         });
-        if smooth && mean > 0.0 {
+        if smooth && chord2 > 0.0 {
             Sampling::Smooth
         } else {
             Sampling::Gentle
