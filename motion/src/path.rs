@@ -1686,6 +1686,43 @@ mod tests {
             .fold(0.0, f64::max)
     }
 
+    /// A random corner blend, or None (its draws spent) where the corner
+    /// is sharper than the 150° the planner blends (see plan.rs): legs
+    /// from 1e-3 to 10 mm.
+    fn random_corner(rnd: &mut dyn FnMut() -> f64) -> Option<Blend> {
+        let u_in: Vec9 = random_unit(rnd);
+        let u_out: Vec9 = random_unit(rnd);
+        let cos = (0..3).map(|i| u_in[i] * u_out[i]).sum::<f64>();
+        if cos < -(3f64.sqrt() / 2.0) {
+            return None;
+        }
+        let leg = 10f64.powf(-3.0 + 4.0 * rnd());
+        Some(Blend::corner(&v(50.0, 50.0, -20.0), &u_in, &u_out, leg))
+    }
+
+    /// A random blend as a dense curve's fit makes them, or None (its
+    /// draws spent) where its ends turn by more than 53°: the curve fit's
+    /// pieces turn by a few degrees, and past 60° the exact rate is
+    /// sampled anyway. Lengths from 0.01 to 1 mm; end curvatures normal
+    /// to the tangents, radii from a tenth of the piece to a hundred
+    /// times it.
+    fn random_curve_piece(rnd: &mut dyn FnMut() -> f64) -> Option<Blend> {
+        let t0 = random_unit(rnd);
+        let t1 = random_unit(rnd);
+        if (0..3).map(|i| t0[i] * t1[i]).sum::<f64>() < 0.6 {
+            return None;
+        }
+        let length = 10f64.powf(-2.0 + 2.0 * rnd());
+        let mut bend = |t: &Vec9| {
+            let radius = length * 10f64.powf(-1.0 + 3.0 * rnd());
+            random_curvature(t, radius, rnd)
+        };
+        let (k0, k1) = (bend(&t0), bend(&t1));
+        let p0 = v(10.0, 20.0, -5.0);
+        let p1: Vec9 = std::array::from_fn(|i| p0[i] + length * (t0[i] + t1[i]) / 2.0);
+        Some(Blend::hermite(&p0, &t0, &k0, &p1, &t1, &k1, length))
+    }
+
     /// A curvature vector of `radius` normal to unit tangent `t`, in a
     /// random direction.
     fn random_curvature(t: &Vec9, radius: f64, rnd: &mut dyn FnMut() -> f64) -> Vec9 {
@@ -1718,16 +1755,9 @@ mod tests {
         let mut rnd = crate::testkit::uniform(0x2545_f491_4f6c_dd1d);
         let mut worst: f64 = 0.0;
         for _ in 0..2000 {
-            let u_in: Vec9 = random_unit(&mut rnd);
-            let u_out: Vec9 = random_unit(&mut rnd);
-            let cos = (0..3).map(|i| u_in[i] * u_out[i]).sum::<f64>();
-            // The planner blends corners up to 150° (see plan.rs).
-            if cos < -(3f64.sqrt() / 2.0) {
-                continue;
+            if let Some(b) = random_corner(&mut rnd) {
+                worst = worst.max(rate_excess(&b));
             }
-            let leg = 10f64.powf(-3.0 + 4.0 * rnd());
-            let b = Blend::corner(&v(50.0, 50.0, -20.0), &u_in, &u_out, leg);
-            worst = worst.max(rate_excess(&b));
         }
         assert!(worst <= 1.0, "exact |dκ/ds| is {worst} times the bound");
     }
@@ -1740,24 +1770,9 @@ mod tests {
         let mut rnd = crate::testkit::uniform(0x9e37_79b9_7f4a_7c15);
         let (mut worst, mut tested): (f64, usize) = (0.0, 0);
         while tested < 2000 {
-            let t0 = random_unit(&mut rnd);
-            let t1 = random_unit(&mut rnd);
-            // Gentle turns only: the curve fit's pieces turn by a few
-            // degrees, and past 60° the exact rate is sampled anyway.
-            if (0..3).map(|i| t0[i] * t1[i]).sum::<f64>() < 0.6 {
+            let Some(b) = random_curve_piece(&mut rnd) else {
                 continue;
-            }
-            let length = 10f64.powf(-2.0 + 2.0 * rnd());
-            // End curvatures normal to the tangents, radii from a tenth of
-            // the piece to a hundred times it.
-            let mut bend = |t: &Vec9| {
-                let radius = length * 10f64.powf(-1.0 + 3.0 * rnd());
-                random_curvature(t, radius, &mut rnd)
             };
-            let (k0, k1) = (bend(&t0), bend(&t1));
-            let p0 = v(10.0, 20.0, -5.0);
-            let p1: Vec9 = std::array::from_fn(|i| p0[i] + length * (t0[i] + t1[i]) / 2.0);
-            let b = Blend::hermite(&p0, &t0, &k0, &p1, &t1, &k1, length);
             worst = worst.max(rate_excess(&b));
             tested += 1;
         }
@@ -1890,29 +1905,12 @@ mod tests {
             let mut tested = 0;
             while tested < 1000 {
                 let b = if kind == 0 {
-                    let u_in: Vec9 = random_unit(&mut rnd);
-                    let u_out: Vec9 = random_unit(&mut rnd);
-                    let cos = (0..3).map(|i| u_in[i] * u_out[i]).sum::<f64>();
-                    if cos < -(3f64.sqrt() / 2.0) {
-                        continue;
-                    }
-                    let leg = 10f64.powf(-3.0 + 4.0 * rnd());
-                    Blend::corner(&v(50.0, 50.0, -20.0), &u_in, &u_out, leg)
+                    random_corner(&mut rnd)
                 } else {
-                    let t0 = random_unit(&mut rnd);
-                    let t1 = random_unit(&mut rnd);
-                    if (0..3).map(|i| t0[i] * t1[i]).sum::<f64>() < 0.6 {
-                        continue;
-                    }
-                    let length = 10f64.powf(-2.0 + 2.0 * rnd());
-                    let mut bend = |t: &Vec9| {
-                        let radius = length * 10f64.powf(-1.0 + 3.0 * rnd());
-                        random_curvature(t, radius, &mut rnd)
-                    };
-                    let (k0, k1) = (bend(&t0), bend(&t1));
-                    let p0 = v(10.0, 20.0, -5.0);
-                    let p1: Vec9 = std::array::from_fn(|i| p0[i] + length * (t0[i] + t1[i]) / 2.0);
-                    Blend::hermite(&p0, &t0, &k0, &p1, &t1, &k1, length)
+                    random_curve_piece(&mut rnd)
+                };
+                let Some(b) = b else {
+                    continue;
                 };
                 if Sampling::of(&b.control_points()) == Sampling::Smooth {
                     continue;
