@@ -525,8 +525,9 @@ impl Blend {
 
     /// The blend with these control points, with its arc-length table, and
     /// the extremes of its tangent, curvature and curvature rate over
-    /// [`SAMPLES`] + 1 evenly spaced parameters, which the planner needs for
-    /// its limits: one pass of polynomial evaluations gives both.
+    /// [`SAMPLES`] + 1 evenly spaced parameters (9 on a smooth blend, a
+    /// dense curve's: [`Sampling`]), which the planner needs for its
+    /// limits: one pass of polynomial evaluations gives both.
     ///
     /// The arc lengths between samples (trapezoids with the end-derivative
     /// correction) only scale the interval means of the curvature rate;
@@ -902,7 +903,8 @@ impl Sampling {
         let (t0, t1) = (step(0), step(4));
         let dot = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2];
         let norms = norm3(&t0) * norm3(&t1);
-        if dot <= 0.5 * norms {
+        // (NaN is sharp, as it always was.)
+        if dot.partial_cmp(&(0.5 * norms)) != Some(std::cmp::Ordering::Greater) {
             return Sampling::Sharp;
         }
         // Each step of the control polygon against the mean step: where
