@@ -2475,20 +2475,29 @@ impl<'k> Planner<'k> {
             SegmentKind::Feed
         };
         let (v, a, j) = chosen.limits.unwrap_or_else(|| self.blend_limits(&chosen));
-        let mut blend = Segment {
-            max_velocity: v,
-            max_acceleration: a,
-            max_jerk: j,
-            ..self.segment_unlimited(kind, b_line_number, Shape::Blend(chosen.blend.0))
-        };
-        blend.feed = a_feed.min(b_feed);
-        blend.moves = moves;
-        blend.reading = b_reading;
-        // The blend starts move b, so it carries b's force setting, not
-        // whatever the program has set since.
-        blend.force_control = b_force;
-        blend.outputs = b_outputs;
-        self.emit(blend, f64::INFINITY);
+        let length = chosen.blend.0.length();
+        // Built where it is queued, its exit speed capped by its own
+        // limit only: a blend segment is half a kilobyte, and building it
+        // in steps before queuing it copied it several times.
+        if length > 0.0 {
+            self.ready.push_back(Segment {
+                kind,
+                line: b_line_number,
+                moves,
+                reading: b_reading,
+                shape: Shape::Blend(chosen.blend.0),
+                length,
+                feed: a_feed.min(b_feed),
+                max_velocity: v,
+                max_acceleration: a,
+                max_jerk: j,
+                exit_velocity: v.min(f64::INFINITY),
+                // The blend starts move b, so it carries b's force
+                // setting, not whatever the program has set since.
+                force_control: b_force,
+                outputs: b_outputs,
+            });
+        }
     }
 
     /// Whether the blend with control points `control` stays where the machine
@@ -2774,13 +2783,6 @@ impl<'k> Planner<'k> {
         }
         let jump: Vec9 = std::array::from_fn(|i| start.curvature[i] - end.curvature[i]);
         self.curvature_jump_cap(&jump)
-    }
-
-    fn emit(&mut self, mut segment: Segment, exit: f64) {
-        if segment.length > 0.0 {
-            segment.exit_velocity = segment.max_velocity.min(exit);
-            self.ready.push_back(segment);
-        }
     }
 
     /// A segment of `shape` with its path limits.
