@@ -1859,10 +1859,11 @@ mod tests {
     }
 
     /// Blends sampled coarsely ([`Sampling::Smooth`]) keep their extremes
-    /// at or above the exact ones, on 500 random pieces like a dense curve's
-    /// (turns up to 0.3 rad, radii from the piece's length to a thousand
-    /// times it), and the tangent's and curvature's only a little above:
-    /// the crest allowance costs speed where the samples are few.
+    /// at or above the exact ones, on 500 random pieces like a dense
+    /// curve's (turns up to 0.3 rad, radii from the piece's length to a
+    /// thousand times it) and 500 gentle corners (turns up to 0.3 rad),
+    /// and the tangent's and curvature's only a little above: the crest
+    /// allowance costs speed where the samples are few.
     ///
     /// The allowance is a parabola's, not a proof: the test holds it to
     /// 1e-5 of the largest component. Here it never falls short; on other
@@ -1872,25 +1873,33 @@ mod tests {
         let mut rnd = crate::testkit::uniform(0x5851_f42d_4c95_7f2d);
         let (mut tested, mut tries) = (0, 0);
         let (mut short, mut over) = ([0.0f64; 3], [0.0f64; 2]);
-        while tested < 500 {
+        while tested < 1000 {
             tries += 1;
             let t0 = random_unit(&mut rnd);
-            let d = random_unit(&mut rnd);
-            let turn = 0.3 * rnd();
+            // Within 0.3 rad of t0.
             let t1 = {
+                let d = random_unit(&mut rnd);
+                let turn = 0.3 * rnd();
                 let t: Vec9 = std::array::from_fn(|i| t0[i] + turn * d[i]);
                 let n = norm(&t);
                 std::array::from_fn::<f64, 9, _>(|i| t[i] / n)
             };
-            let length = 10f64.powf(-2.0 + 2.0 * rnd());
-            let mut bend = |t: &Vec9| {
-                let radius = length * 10f64.powf(3.0 * rnd());
-                random_curvature(t, radius, &mut rnd)
+            // Half pieces of curve, half gentle corners (legs from 1e-3
+            // to 10 mm), as a G64 corner of a few degrees makes them.
+            let b = if tested % 2 == 0 {
+                let length = 10f64.powf(-2.0 + 2.0 * rnd());
+                let mut bend = |t: &Vec9| {
+                    let radius = length * 10f64.powf(3.0 * rnd());
+                    random_curvature(t, radius, &mut rnd)
+                };
+                let (k0, k1) = (bend(&t0), bend(&t1));
+                let p0 = v(10.0, 20.0, -5.0);
+                let p1: Vec9 = std::array::from_fn(|i| p0[i] + length * (t0[i] + t1[i]) / 2.0);
+                Blend::hermite(&p0, &t0, &k0, &p1, &t1, &k1, length)
+            } else {
+                let leg = 10f64.powf(-3.0 + 4.0 * rnd());
+                Blend::corner(&v(50.0, 50.0, -20.0), &t0, &t1, leg)
             };
-            let (k0, k1) = (bend(&t0), bend(&t1));
-            let p0 = v(10.0, 20.0, -5.0);
-            let p1: Vec9 = std::array::from_fn(|i| p0[i] + length * (t0[i] + t1[i]) / 2.0);
-            let b = Blend::hermite(&p0, &t0, &k0, &p1, &t1, &k1, length);
             if Sampling::of(&b.control_points()) != Sampling::Smooth {
                 continue;
             }
