@@ -29,15 +29,9 @@ use kerf_motion::offline::{self, plan_program, RunConfig};
 use kerf_motion::schedule::{schedule, ScheduleConfig, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig};
 
-/// How the bench's schedules are solved (the command's numbers).
-#[derive(Clone, Copy)]
-struct Solve {
-    passes: usize,
-    window: Option<Window>,
-    nodes_per_period: Option<f64>,
-}
-
-fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: Solve) {
+/// One program's row, its schedule solved as `solve` says (the command's
+/// numbers) at the planner's servo period.
+fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) {
     let planner = PlannerConfig {
         mode: PathMode::Blend { tolerance: 0.01 },
         ..PlannerConfig::default()
@@ -57,10 +51,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: Solve) {
     let t0 = Instant::now();
     let config = ScheduleConfig {
         period: planner.period,
-        passes: solve.passes,
-        window: solve.window,
-        nodes_per_period: solve.nodes_per_period,
-        ..ScheduleConfig::default()
+        ..solve
     };
     let found = schedule(&segments, kins, config).expect("mill3 has trivial kinematics");
     let wall = t0.elapsed().as_secs_f64();
@@ -104,10 +95,11 @@ fn main() {
         _ => None,
     };
     let nodes_per_period = numbers.get(4).map(|&n| n as f64);
-    let solve = Solve {
+    let solve = ScheduleConfig {
         passes,
         window,
         nodes_per_period,
+        ..ScheduleConfig::default()
     };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;

@@ -403,14 +403,23 @@ impl PathWindow {
 
 /// Finite-difference limit tracker for one coordinate.
 #[derive(Clone, Copy, Debug, Default)]
-struct Differences {
+pub(crate) struct Differences {
     last: [f64; 3],
     seen: usize,
 }
 
 impl Differences {
+    /// A coordinate that has stood at `x` for three samples: the next
+    /// sample's velocity, acceleration and jerk are defined.
+    pub(crate) fn at_rest(x: f64) -> Differences {
+        Differences {
+            last: [x; 3],
+            seen: 3,
+        }
+    }
+
     /// Push a sample; returns (velocity, acceleration, jerk) once defined.
-    fn push(&mut self, x: f64, dt: f64) -> [Option<f64>; 3] {
+    pub(crate) fn push(&mut self, x: f64, dt: f64) -> [Option<f64>; 3] {
         let [p1, p2, p3] = self.last;
         let out = [
             (self.seen >= 1).then(|| (x - p1) / dt),

@@ -66,6 +66,7 @@ use banded::{BandedLp, Failure};
 
 use crate::bound::arc_third;
 use crate::kinematics::Kinematics;
+use crate::offline::Differences;
 use crate::path::{Shape, Vec9};
 use crate::plan::{Segment, SegmentKind};
 
@@ -974,15 +975,16 @@ impl Schedule {
                 from_rest[k] = from_rest[k].min(count);
             }
         }
+        // At rest before: every difference is defined from the first
+        // sample on.
         let start = segments[first.segment].shape.point(first.at);
-        // The last three samples, newest first.
-        let mut last = [start; 3];
+        let mut axes = start.map(Differences::at_rest);
         let mut see = |p: Vec9, in_motion: bool, out: &mut Sampled| {
             for i in 0..9 {
-                let [p1, p2, p3] = [last[0][i], last[1][i], last[2][i]];
-                let v = (p[i] - p1) / period;
-                let a = (p[i] - 2.0 * p1 + p2) / (period * period);
-                let j = (p[i] - 3.0 * p1 + 3.0 * p2 - p3) / (period * period * period);
+                // (All three are defined: the axes start at rest.)
+                let [Some(v), Some(a), Some(j)] = axes[i].push(p[i], period) else {
+                    continue;
+                };
                 let u = &mut out.limits;
                 u.velocity = u.velocity.max(v.abs() / limits.v[i]);
                 u.acceleration = u.acceleration.max(a.abs() / limits.a[i]);
@@ -991,7 +993,6 @@ impl Schedule {
                     out.jerk_in_motion = out.jerk_in_motion.max(j.abs() / limits.j[i]);
                 }
             }
-            last = [p, last[0], last[1]];
         };
         // Time at the start of the interval, and of the next sample;
         // samples in a row taken in motion.
