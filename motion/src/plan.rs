@@ -884,12 +884,11 @@ fn fitted_frame(
         return Some(frame);
     }
     let centre = &chords[at];
-    let side = fit_side(chords, at, end, FIT_SIDE);
+    let window = &mut points.window;
+    let side = window.walk_into(chords, at, end, FIT_SIDE);
     if side < FIT_MIN_SIDE {
         return None;
     }
-    let window = &mut points.window;
-    window.gather_into(chords, at, side);
     window.reach = 1.25 * window.extent();
     let mut frame = window.fit()?;
     for i in 0..3 {
@@ -1017,11 +1016,10 @@ fn fitted_point(
     window: &mut FitWindow,
 ) -> Option<[f64; 3]> {
     let centre = &chords[at];
-    let side = fit_side(chords, at, end, POINT_SIDE);
+    let side = window.walk_into(chords, at, end, POINT_SIDE);
     if side < FIT_MIN_SIDE {
         return None;
     }
-    window.gather_into(chords, at, side);
     // The weights should fall to zero where a chord leaves the window, so
     // that the points at neighbouring midpoints lie on one smooth curve,
     // and the reach should not move with every chord's rounding. Where
@@ -1088,7 +1086,18 @@ impl FittedPoints {
 /// up to `most`, before a corner (a bend over FIT_BEND), within FIT_REACH
 /// and FIT_TURN of the centre (turn measured as |u − u_centre|, which
 /// bounds how far the curve strays from a cubic there).
-fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usize {
+///
+/// `accept` sees each chord the walk takes, with its place from the
+/// centre (negative before it), in the order it walks: outward after the
+/// centre, then outward before it. The chords after the centre it takes
+/// may be more than the side's count (the side before ends sooner).
+fn fit_side(
+    chords: &VecDeque<Chord>,
+    at: usize,
+    end: usize,
+    most: usize,
+    mut accept: impl FnMut(isize, &Chord),
+) -> usize {
     let centre = &chords[at];
     let within = |c: &Chord| {
         (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
@@ -1100,6 +1109,7 @@ fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usi
             break;
         }
         after += 1;
+        accept(after as isize, c);
     }
     // A chord's `corner` is its bend to the one before it.
     let mut side = 0;
@@ -1109,6 +1119,7 @@ fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usi
             break;
         }
         side += 1;
+        accept(-(side as isize), c);
         nearer = c;
     }
     side
@@ -1116,14 +1127,16 @@ fn fit_side(chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usi
 
 /// Midpoints a curve fit sees around one line's midpoint, in path order,
 /// as many before it as after it: their path length from it (`x`, mm,
-/// negative before it) and their offsets from it (`y`, mm) in the first
-/// `used` slots, zeros in the rest of the last lane of FIT_LANES slots,
-/// and whatever an earlier window left beyond (never read). Path lengths
+/// negative before it) and their offsets from it (`y`, mm) in `used`
+/// slots from `start` on, zeros in the rest of the last lane of FIT_LANES
+/// slots, and whatever an earlier window left elsewhere (never read). Path lengths
 /// enter the fit as fractions of `reach`, mm, beyond which the weights
 /// are zero.
 struct FitWindow {
     x: [f64; FIT_SLOTS],
     y: [[f64; FIT_SLOTS]; 3],
+    /// The slot of the first midpoint the fit sees.
+    start: usize,
     used: usize,
     reach: f64,
 }
@@ -1168,7 +1181,7 @@ impl FitWindow {
         for c in 0..used.div_ceil(FIT_LANES) {
             for l in 0..FIT_LANES {
                 let k = c * FIT_LANES + l;
-                let u = self.x[k] * scale;
+                let u = self.x[self.start + k] * scale;
                 let r = u.abs().min(1.0);
                 let f = 1.0 - r * r * r;
                 let mask = if k < used { 1.0 } else { 0.0 };
@@ -1181,7 +1194,7 @@ impl FitWindow {
                     }
                 }
                 for i in 0..3 {
-                    let mut p = w * self.y[i][k];
+                    let mut p = w * self.y[i][self.start + k];
                     for (m, rhs) in s.rhs[i].iter_mut().enumerate() {
                         rhs[l] += p;
                         if m + 1 < FIT_TERMS {
@@ -1202,9 +1215,11 @@ impl FitWindow {
         use std::arch::x86_64::*;
         const _: () = assert!(FIT_LANES == 4 && FIT_SLOTS.is_multiple_of(4));
         // Not closures: they would not inherit this function's AVX.
+        let start = self.start;
         macro_rules! load {
             ($a:expr, $c:expr) => {{
-                let lane: &[f64; 4] = $a[$c * 4..$c * 4 + 4].try_into().unwrap();
+                let at = start + $c * 4;
+                let lane: &[f64; 4] = $a[at..at + 4].try_into().unwrap();
                 // SAFETY: `lane` is four readable f64.
                 unsafe { _mm256_loadu_pd(lane.as_ptr()) }
             }};
@@ -1297,18 +1312,20 @@ impl FitWindow {
         FitWindow {
             x: [0.0; FIT_SLOTS],
             y: [[0.0; FIT_SLOTS]; 3],
+            start: 0,
             used: 0,
             reach: 0.0,
         }
     }
 
     /// The midpoints of `chords[at]` and of `side` chords on each side,
-    /// relative to the first's, into this window (reach unset): only the
-    /// slots the sums read (whole lanes) are written, the rest keep
-    /// whatever they held (zeroing all of them showed in the planning
-    /// time).
+    /// relative to the first's, into this window from slot 0 (reach
+    /// unset), zeros to the end of the last lane: the window plainly,
+    /// which the tests hold [`walk_into`](Self::walk_into)'s to.
+    #[cfg(test)]
     fn gather_into(&mut self, chords: &VecDeque<Chord>, at: usize, side: usize) {
         let centre = &chords[at];
+        self.start = 0;
         self.used = 2 * side + 1;
         for (k, c) in chords.range(at - side..=at + side).enumerate() {
             self.x[k] = c.station - centre.station;
@@ -1324,9 +1341,42 @@ impl FitWindow {
         }
     }
 
+    /// [`fit_side`] and [`gather_into`](Self::gather_into) in one walk
+    /// along the chords, which both read: each midpoint goes into its
+    /// slot about a centre slot FIT_SIDE as it is accepted, and the
+    /// window starts where the shorter side ends. The slots from `start`
+    /// hold what `gather_into` writes from 0, and the sums' lanes start
+    /// there, so the fit is the same to the bit. Returns how many chords
+    /// on each side the window takes (`most` at most, which is at most
+    /// FIT_SIDE).
+    fn walk_into(&mut self, chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usize {
+        const CENTRE: usize = FIT_SIDE;
+        let centre = &chords[at];
+        let mut put = |k: usize, c: &Chord| {
+            self.x[k] = c.station - centre.station;
+            for i in 0..3 {
+                self.y[i][k] = c.midpoint[i] - centre.midpoint[i];
+            }
+        };
+        put(CENTRE, centre);
+        let side = fit_side(chords, at, end, most.min(FIT_SIDE), |k, c| {
+            put(CENTRE.wrapping_add_signed(k), c)
+        });
+        self.start = CENTRE - side;
+        self.used = 2 * side + 1;
+        let lanes_end = self.start + self.used.next_multiple_of(FIT_LANES);
+        for k in self.start + self.used..lanes_end {
+            self.x[k] = 0.0;
+            for i in 0..3 {
+                self.y[i][k] = 0.0;
+            }
+        }
+        side
+    }
+
     /// Path length from the centre to the farther outermost midpoint, mm.
     fn extent(&self) -> f64 {
-        (-self.x[0]).max(self.x[self.used.max(1) - 1])
+        (-self.x[self.start]).max(self.x[self.start + self.used.max(1) - 1])
     }
 
     /// The curve that dense chords sample, near the centre midpoint: the
@@ -1346,7 +1396,8 @@ impl FitWindow {
     fn solve(&self) -> Option<[[f64; 3]; FIT_TERMS]> {
         let used = self.used;
         let reach = self.reach;
-        if !(1..=FIT_SLOTS).contains(&used)
+        if used == 0
+            || self.start + used.next_multiple_of(FIT_LANES) > FIT_SLOTS
             || reach.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
         {
             return None;
@@ -3817,13 +3868,28 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             let mut rand = crate::testkit::uniform(7);
-            for used in 1..=FIT_SLOTS {
+            // Windows from slot 0 (`gather_into`) and from any other
+            // (`walk_into`), whose lanes start there.
+            let windows = (0..4).flat_map(|start| {
+                (1..=FIT_SLOTS - start)
+                    .filter(move |used| start + used.next_multiple_of(FIT_LANES) <= FIT_SLOTS)
+                    .map(move |used| (start, used))
+            });
+            for (start, used) in windows {
                 let mut w = FitWindow::new();
+                // Slots outside the window hold what earlier ones left.
+                w.x.fill(f64::NAN);
+                w.start = start;
                 w.used = used;
-                for k in 0..used {
-                    w.x[k] = (k as f64 - used as f64 / 2.0) * 0.02 + 1e-3 * rand();
+                for k in start..start + used.next_multiple_of(FIT_LANES) {
+                    let inside = k < start + used;
+                    w.x[k] = if inside {
+                        ((k - start) as f64 - used as f64 / 2.0) * 0.02 + 1e-3 * rand()
+                    } else {
+                        0.0
+                    };
                     for i in 0..3 {
-                        w.y[i][k] = 0.3 * rand() - 0.15;
+                        w.y[i][k] = if inside { 0.3 * rand() - 0.15 } else { 0.0 };
                     }
                 }
                 let scale = 1.0 / (0.03 * used as f64);
@@ -3839,10 +3905,81 @@ mod tests {
                         .map(|v| v.to_bits())
                         .collect()
                 };
-                assert_eq!(bits(&plain), bits(&avx), "{used} slots");
+                assert_eq!(bits(&plain), bits(&avx), "{used} slots from {start}");
                 assert!(plain.moments[0].iter().sum::<f64>() > 0.0);
             }
         }
+    }
+
+    #[test]
+    fn a_walked_window_fits_as_a_gathered_one_to_the_bit() {
+        // Chords of random lengths (some past FIT_REACH's share) turning
+        // by random amounts (some past FIT_BEND, some past FIT_TURN in
+        // all), with breaks: windows of every shape the walk can stop at.
+        let mut rand = crate::testkit::uniform(11);
+        let mut chords: VecDeque<Chord> = VecDeque::new();
+        let (mut p, mut heading) = ([0.0f64; 3], 0.0f64);
+        for n in 0..3000 {
+            if n % 700 == 350 {
+                chords.push_back(Chord::BREAK);
+                continue;
+            }
+            let length = if rand() < 0.05 {
+                0.2 * rand()
+            } else {
+                0.01 + 0.03 * rand()
+            };
+            heading += if rand() < 0.02 {
+                0.3
+            } else {
+                0.04 * (rand() - 0.5)
+            };
+            let direction = [heading.cos(), heading.sin(), 0.0];
+            let end: [f64; 3] = std::array::from_fn(|i| p[i] + length * direction[i]);
+            let line = Line {
+                start: std::array::from_fn(|i| if i < 3 { p[i] } else { 0.0 }),
+                end: std::array::from_fn(|i| if i < 3 { end[i] } else { 0.0 }),
+            };
+            let programmed = Programmed::new(line);
+            chords.push_back(Chord::of(&programmed, chords.back()));
+            p = end;
+        }
+        let (mut walked, mut gathered) = (FitWindow::new(), FitWindow::new());
+        let mut fitted = 0;
+        for at in 1..chords.len() - 1 {
+            if chords[at].is_break() {
+                continue;
+            }
+            // Windows that see every chord after, and only a few; of
+            // fitted points and of fitted frames.
+            let ends = [chords.len(), (at + 3).min(chords.len())];
+            for (end, most) in ends
+                .into_iter()
+                .flat_map(|e| [(e, POINT_SIDE), (e, FIT_SIDE)])
+            {
+                let side = fit_side(&chords, at, end, most, |_, _| {});
+                assert_eq!(walked.walk_into(&chords, at, end, most), side, "at {at}");
+                gathered.gather_into(&chords, at, side);
+                assert_eq!(walked.used, gathered.used);
+                assert_eq!(walked.extent().to_bits(), gathered.extent().to_bits());
+                if side < FIT_MIN_SIDE {
+                    continue;
+                }
+                walked.reach = 1.25 * walked.extent();
+                gathered.reach = walked.reach;
+                let bits = |c: Option<[[f64; 3]; FIT_TERMS]>| {
+                    c.map(|c| {
+                        c.as_flattened()
+                            .iter()
+                            .map(|v| v.to_bits())
+                            .collect::<Vec<_>>()
+                    })
+                };
+                assert_eq!(bits(walked.solve()), bits(gathered.solve()), "at {at}");
+                fitted += 1;
+            }
+        }
+        assert!(fitted > 2000, "{fitted} windows fitted");
     }
 
     /// A window of the midpoints of chords of `chord` mm inscribed in a
