@@ -12,8 +12,10 @@
 use std::collections::VecDeque;
 
 mod ahead;
+mod chords;
 
 use ahead::{Fallback, Speculation, Worked};
+use chords::{fit_side, Chord, Chords};
 
 use kerf_interp::{Axis, Canon, CanonCmd, MotionMode, Position, Source};
 
@@ -717,7 +719,7 @@ pub struct Planner<'k> {
     /// first waiting move, while they form one polyline with it (oldest
     /// first), then one per waiting move ([`Chord::BREAK`] for any but a
     /// line in X Y Z).
-    chords: VecDeque<Chord>,
+    chords: Chords,
     /// How many of `chords` come before the first waiting move.
     behind: usize,
     /// Waiting moves released so far (the first waiting move's index
@@ -797,60 +799,6 @@ const FIT_TURN: f64 = 0.4;
 /// past it the lines are corners, not chords of one curve.
 const FIT_BEND: f64 = 0.1;
 
-/// A programmed line as the curve fit sees it.
-#[derive(Clone, Copy, Debug)]
-struct Chord {
-    midpoint: [f64; 3],
-    direction: [f64; 3],
-    length: f64,
-    /// Path length of the midpoint along the polyline the chord belongs
-    /// to, mm, from an origin that only differences cancel.
-    station: f64,
-    /// Whether the polyline is broken between this chord and the one
-    /// before it: a bend over [`FIT_BEND`], or either is a
-    /// [`Chord::BREAK`].
-    corner: bool,
-}
-
-impl Chord {
-    /// Where the polyline the fit may use ends (an arc, or a line that
-    /// moves more than X Y Z).
-    const BREAK: Chord = Chord {
-        midpoint: [0.0; 3],
-        direction: [0.0; 3],
-        length: f64::NAN,
-        station: 0.0,
-        corner: true,
-    };
-
-    fn is_break(&self) -> bool {
-        self.length.is_nan()
-    }
-
-    /// The chord of `p`, following `before` (the chord queued before it).
-    fn of(p: &Programmed, before: Option<&Chord>) -> Chord {
-        let mut chord = Chord {
-            midpoint: std::array::from_fn(|i| 0.5 * (p.line.start[i] + p.line.end[i])),
-            direction: std::array::from_fn(|i| p.direction[i]),
-            length: p.length,
-            station: 0.0,
-            corner: true,
-        };
-        if let Some(b) = before.filter(|b| !b.is_break()) {
-            chord.corner = b.bend2(&chord) > FIT_BEND * FIT_BEND;
-            chord.station = b.station + 0.5 * (b.length + chord.length);
-        }
-        chord
-    }
-
-    /// |u1 − u2|² between the chords' directions.
-    fn bend2(&self, other: &Chord) -> f64 {
-        (0..3)
-            .map(|i| (other.direction[i] - self.direction[i]).powi(2))
-            .sum()
-    }
-}
-
 /// The frame at the midpoint of `chords[at]`, the chord of line `p`, on
 /// the curve fitted through it and its neighbours, when at least
 /// [`FIT_MIN_SIDE`] chords on each side continue it without a corner.
@@ -872,7 +820,7 @@ impl Chord {
 /// a run, where a neighbour's fit has too few chords) the fit's own
 /// derivatives stand.
 fn fitted_frame(
-    chords: &VecDeque<Chord>,
+    chords: &Chords,
     at: usize,
     end: usize,
     p: &Programmed,
@@ -883,16 +831,15 @@ fn fitted_frame(
         frame.point[3..].copy_from_slice(&p.line.start[3..]);
         return Some(frame);
     }
-    let centre = &chords[at];
-    let window = &mut points.window;
-    let side = window.walk_into(chords, at, end, FIT_SIDE);
+    let (mut window, side) = FitWindow::walk(chords, at, end, FIT_SIDE);
     if side < FIT_MIN_SIDE {
         return None;
     }
     window.reach = 1.25 * window.extent();
     let mut frame = window.fit()?;
+    let centre = chords.midpoint(at);
     for i in 0..3 {
-        frame.point[i] += centre.midpoint[i];
+        frame.point[i] += centre[i];
     }
     frame.point[3..].copy_from_slice(&p.line.start[3..]);
     Some(frame)
@@ -903,13 +850,13 @@ fn fitted_frame(
 /// the fits stop sooner (X Y Z; the rest zero), when at least the nearest
 /// neighbours continue the curve and fit.
 fn differenced_frame(
-    chords: &VecDeque<Chord>,
+    chords: &Chords,
     at: usize,
     end: usize,
     origin: u64,
     points: &mut FittedPoints,
 ) -> Option<Frame> {
-    if at == 0 || at + 1 >= end || chords[at].corner || chords[at + 1].corner {
+    if at == 0 || at + 1 >= end || chords.corner(at) || chords.corner(at + 1) {
         return None;
     }
     let mut point = |k: usize| points.get(chords, k, end, origin);
@@ -917,7 +864,7 @@ fn differenced_frame(
     // average more of what the fit leaves of the rounding (a circle of R5
     // in 0.02 mm chords rounded to 1e-3 mm: 1.02 times the exact circle's
     // time, 1.29 with three points). Else three.
-    let wide = at >= 2 && at + 2 < end && !chords[at - 1].corner && !chords[at + 2].corner;
+    let wide = at >= 2 && at + 2 < end && !chords.corner(at - 1) && !chords.corner(at + 2);
     if wide {
         if let Some(frame) = differenced::<5>(chords, at - 2, &mut point) {
             return Some(frame);
@@ -931,7 +878,7 @@ fn differenced_frame(
 /// differences on their uneven stations (the chords' midpoints along the
 /// polyline, the fit's own parameter).
 fn differenced<const N: usize>(
-    chords: &VecDeque<Chord>,
+    chords: &Chords,
     first: usize,
     point: &mut impl FnMut(usize) -> Option<[f64; 3]>,
 ) -> Option<Frame> {
@@ -941,7 +888,7 @@ fn differenced<const N: usize>(
     }
     let c = N / 2;
     let x: [f64; N] =
-        std::array::from_fn(|n| chords[first + n].station - chords[first + c].station);
+        std::array::from_fn(|n| chords.station(first + n) - chords.station(first + c));
     if x.windows(2)
         .any(|w| w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater))
     {
@@ -1008,15 +955,9 @@ const POINT_SIDE: usize = FIT_SIDE - 2;
 
 /// The point at the midpoint of `chords[at]` on the curve fitted through
 /// it and its neighbours ([`FitWindow::solve`]), seeing chords before
-/// `end`, gathered into `window`.
-fn fitted_point(
-    chords: &VecDeque<Chord>,
-    at: usize,
-    end: usize,
-    window: &mut FitWindow,
-) -> Option<[f64; 3]> {
-    let centre = &chords[at];
-    let side = window.walk_into(chords, at, end, POINT_SIDE);
+/// `end`.
+fn fitted_point(chords: &Chords, at: usize, end: usize) -> Option<[f64; 3]> {
+    let (mut window, side) = FitWindow::walk(chords, at, end, POINT_SIDE);
     if side < FIT_MIN_SIDE {
         return None;
     }
@@ -1034,7 +975,7 @@ fn fitted_point(
         (1.25 * extent).min(FIT_REACH)
     };
     let coef = window.solve()?;
-    Some(std::array::from_fn(|i| coef[0][i] + centre.midpoint[i]))
+    Some(std::array::from_fn(|i| coef[0][i] + window.midpoint[i]))
 }
 
 /// The last few fitted points ([`fitted_point`]), by the index among all
@@ -1045,9 +986,6 @@ fn fitted_point(
 pub(super) struct FittedPoints {
     slots: [(u64, u64, Option<[f64; 3]>); 6],
     next: usize,
-    /// The fits' window, reused by every fit of its caller
-    /// ([`FitWindow::gather_into`]).
-    window: FitWindow,
 }
 
 impl FittedPoints {
@@ -1055,94 +993,40 @@ impl FittedPoints {
         FittedPoints {
             slots: [(u64::MAX, 0, None); 6],
             next: 0,
-            window: FitWindow::new(),
         }
     }
 
     /// [`fitted_point`] at `chords[at]`, `origin` being the index of
     /// `chords[0]`.
-    fn get(
-        &mut self,
-        chords: &VecDeque<Chord>,
-        at: usize,
-        end: usize,
-        origin: u64,
-    ) -> Option<[f64; 3]> {
+    fn get(&mut self, chords: &Chords, at: usize, end: usize, origin: u64) -> Option<[f64; 3]> {
         let index = origin + at as u64;
         // Nothing past POINT_SIDE chords after the centre changes the fit.
         let seen = (origin + end as u64).min(index + 1 + POINT_SIDE as u64);
         if let Some(&(_, _, point)) = self.slots.iter().find(|s| s.0 == index && s.1 == seen) {
             return point;
         }
-        let point = fitted_point(chords, at, end, &mut self.window);
+        let point = fitted_point(chords, at, end);
         self.slots[self.next] = (index, seen, point);
         self.next = (self.next + 1) % self.slots.len();
         point
     }
 }
 
-/// How many chords a fit centred on the midpoint of `chords[at]` may take
-/// on each side, seeing those before `end`: as many as both sides have,
-/// up to `most`, before a corner (a bend over FIT_BEND), within FIT_REACH
-/// and FIT_TURN of the centre (turn measured as |u − u_centre|, which
-/// bounds how far the curve strays from a cubic there).
-///
-/// `accept` sees each chord the walk takes, with its place from the
-/// centre (negative before it), in the order it walks: outward after the
-/// centre, then outward before it. The chords after the centre it takes
-/// may be more than the side's count (the side before ends sooner).
-fn fit_side(
-    chords: &VecDeque<Chord>,
-    at: usize,
-    end: usize,
-    most: usize,
-    mut accept: impl FnMut(isize, &Chord),
-) -> usize {
-    let centre = &chords[at];
-    let within = |c: &Chord| {
-        (c.station - centre.station).abs() + 0.5 * c.length <= FIT_REACH
-            && centre.bend2(c) <= FIT_TURN * FIT_TURN
-    };
-    let mut after = 0;
-    for c in chords.range(at + 1..end).take(most) {
-        if c.corner || !within(c) {
-            break;
-        }
-        after += 1;
-        accept(after as isize, c);
-    }
-    // A chord's `corner` is its bend to the one before it.
-    let mut side = 0;
-    let mut nearer = centre;
-    for c in chords.range(..at).rev().take(after) {
-        if nearer.corner || !within(c) {
-            break;
-        }
-        side += 1;
-        accept(-(side as isize), c);
-        nearer = c;
-    }
-    side
-}
-
 /// Midpoints a curve fit sees around one line's midpoint, in path order,
-/// as many before it as after it: their path length from it (`x`, mm,
-/// negative before it) and their offsets from it (`y`, mm) in `used`
-/// slots from `start` on, zeros in the rest of the last lane of FIT_LANES
-/// slots, and whatever an earlier window left elsewhere (never read). Path lengths
-/// enter the fit as fractions of `reach`, mm, beyond which the weights
-/// are zero.
-struct FitWindow {
-    x: [f64; FIT_SLOTS],
-    y: [[f64; FIT_SLOTS]; 3],
-    /// The slot of the first midpoint the fit sees.
-    start: usize,
+/// as many before it as after it: `used` chords kept from storage slot
+/// `first` of `chords` on. The fit takes their path length from the
+/// centre's (`x`, mm, negative before it) and their offsets from the
+/// centre's midpoint (`y`, mm) straight from the chords' fields, as
+/// fractions of `reach`, mm, beyond which the weights are zero.
+struct FitWindow<'c> {
+    chords: &'c Chords,
+    first: usize,
     used: usize,
+    /// The centre chord's station and midpoint.
+    station: f64,
+    midpoint: [f64; 3],
     reach: f64,
 }
-
-/// Slots of a [`FitWindow`], in whole lanes of [`FIT_LANES`].
-const FIT_SLOTS: usize = (2 * FIT_SIDE + 1).next_multiple_of(FIT_LANES);
 
 /// Sums over a window's slots run in this many interleaved partial sums,
 /// one per lane of a vector register; the order of additions is fixed, so
@@ -1160,17 +1044,41 @@ struct FitSums {
     rhs: [[Lanes; FIT_TERMS]; 3],
 }
 
-impl FitWindow {
-    /// The fit's weighted sums over the first `used` slots, with the
-    /// path lengths scaled by `scale`, one lane of FIT_LANES slots after
-    /// another. Weights fall smoothly to zero past the outermost
-    /// midpoints (tricube): with equal weights, each step of the window
-    /// along the chords would drop and add a point of large leverage, and
-    /// the noise would come back as jumps between neighbouring fits.
+impl<'c> FitWindow<'c> {
+    /// The window of a fit centred on chord `at`, seeing chords before
+    /// `end`, with [`fit_side`]'s count of chords on each side (at most
+    /// `most`), and that count. Reach unset.
+    fn walk(chords: &'c Chords, at: usize, end: usize, most: usize) -> (FitWindow<'c>, usize) {
+        let side = fit_side(chords, at, end, most);
+        let centre = chords.slot(at);
+        let window = FitWindow {
+            chords,
+            first: centre - side,
+            used: 2 * side + 1,
+            station: chords.station[centre],
+            midpoint: chords.midpoint(at),
+            reach: 0.0,
+        };
+        (window, side)
+    }
+
+    /// Slot `k`'s path length from the centre, mm.
+    fn x(&self, k: usize) -> f64 {
+        self.chords.station[self.first + k] - self.station
+    }
+
+    /// The fit's weighted sums over the window's `used` chords, with the
+    /// path lengths scaled by `scale`, one lane of FIT_LANES chords after
+    /// another (the last lane's chords past the window read whatever the
+    /// chords' fields hold there, finite, and weigh +0). Weights fall
+    /// smoothly to zero past the outermost midpoints (tricube): with equal
+    /// weights, each step of the window along the chords would drop and
+    /// add a point of large leverage, and the noise would come back as
+    /// jumps between neighbouring fits.
     ///
     /// This is the plain version, and the reference for
     /// [`sums_avx`](Self::sums_avx), which does the same operations in the
-    /// same order four slots per instruction: the compiler did not manage
+    /// same order four chords per instruction: the compiler did not manage
     /// that on its own, and the sums were half the planner's time on dense
     /// chords.
     fn sums_lanes(&self, used: usize, scale: f64) -> FitSums {
@@ -1181,7 +1089,7 @@ impl FitWindow {
         for c in 0..used.div_ceil(FIT_LANES) {
             for l in 0..FIT_LANES {
                 let k = c * FIT_LANES + l;
-                let u = self.x[self.start + k] * scale;
+                let u = self.x(k) * scale;
                 let r = u.abs().min(1.0);
                 let f = 1.0 - r * r * r;
                 let mask = if k < used { 1.0 } else { 0.0 };
@@ -1194,7 +1102,8 @@ impl FitWindow {
                     }
                 }
                 for i in 0..3 {
-                    let mut p = w * self.y[i][self.start + k];
+                    let y = self.chords.midpoint[i][self.first + k] - self.midpoint[i];
+                    let mut p = w * y;
                     for (m, rhs) in s.rhs[i].iter_mut().enumerate() {
                         rhs[l] += p;
                         if m + 1 < FIT_TERMS {
@@ -1207,21 +1116,32 @@ impl FitWindow {
         s
     }
 
-    /// [`sums_lanes`](Self::sums_lanes) in AVX instructions, four slots
+    /// [`sums_lanes`](Self::sums_lanes) in AVX instructions, four chords
     /// at once (mul and add, no FMA: every operation rounds as there).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     fn sums_avx(&self, used: usize, scale: f64) -> FitSums {
         use std::arch::x86_64::*;
-        const _: () = assert!(FIT_LANES == 4 && FIT_SLOTS.is_multiple_of(4));
+        const _: () = assert!(FIT_LANES == 4);
+        let chords = self.chords;
+        let chunks = used.div_ceil(4);
+        // Every field is as long as the stations (checked once, here,
+        // rather than at every load).
+        let end = self.first + 4 * chunks;
+        assert!(
+            end <= chords.station.len()
+                && chords
+                    .midpoint
+                    .iter()
+                    .all(|m| m.len() == chords.station.len())
+        );
+        let first = self.first;
         // Not closures: they would not inherit this function's AVX.
-        let start = self.start;
         macro_rules! load {
             ($a:expr, $c:expr) => {{
-                let at = start + $c * 4;
-                let lane: &[f64; 4] = $a[at..at + 4].try_into().unwrap();
-                // SAFETY: `lane` is four readable f64.
-                unsafe { _mm256_loadu_pd(lane.as_ptr()) }
+                // SAFETY: first + 4·c + 3 < end, within every field
+                // (asserted above).
+                unsafe { _mm256_loadu_pd($a.as_ptr().add(first + $c * 4)) }
             }};
         }
         let mut out = FitSums {
@@ -1238,31 +1158,41 @@ impl FitWindow {
         let one = _mm256_set1_pd(1.0);
         let sign = _mm256_set1_pd(-0.0);
         let scale = _mm256_set1_pd(scale);
-        let first = _mm256_set_pd(3.0, 2.0, 1.0, 0.0);
+        let station = _mm256_set1_pd(self.station);
+        let midpoint = [
+            _mm256_set1_pd(self.midpoint[0]),
+            _mm256_set1_pd(self.midpoint[1]),
+            _mm256_set1_pd(self.midpoint[2]),
+        ];
+        let first_slots = _mm256_set_pd(3.0, 2.0, 1.0, 0.0);
         let used_f = _mm256_set1_pd(used as f64);
-        let chunks = used.div_ceil(4);
         let mut moments = [zero; 2 * FIT_TERMS - 1];
         let mut rhs0 = [zero; FIT_TERMS];
         // The weight and u of chunk `c`'s lanes. Worked out again for the
         // second pass (X, Y and Z in one pass would need more registers
-        // than there are): cheaper than an array that keeps them, which
-        // the compiler zeroes whole on every call.
+        // than there are): cheaper than an array that keeps them.
         macro_rules! weights {
             ($c:expr) => {{
                 let c = $c;
-                let u = _mm256_mul_pd(load!(self.x, c), scale);
+                let x = _mm256_sub_pd(load!(chords.station, c), station);
+                let u = _mm256_mul_pd(x, scale);
                 let r = _mm256_min_pd(_mm256_andnot_pd(sign, u), one);
                 let f = _mm256_sub_pd(one, _mm256_mul_pd(_mm256_mul_pd(r, r), r));
-                // Slots past `used` weigh +0, as f³·0 does in the plain
-                // sums (f ≥ 0): all bits kept where the slot's index is
+                // Chords past `used` weigh +0, as f³·0 does in the plain
+                // sums (f ≥ 0): all bits kept where the lane's index is
                 // below `used`, none elsewhere.
-                let slot = _mm256_add_pd(first, _mm256_set1_pd((c * 4) as f64));
+                let slot = _mm256_add_pd(first_slots, _mm256_set1_pd((c * 4) as f64));
                 let mask = _mm256_cmp_pd::<_CMP_LT_OQ>(slot, used_f);
                 (
                     _mm256_and_pd(_mm256_mul_pd(_mm256_mul_pd(f, f), f), mask),
                     u,
                 )
             }};
+        }
+        macro_rules! offset {
+            ($i:expr, $c:expr) => {
+                _mm256_sub_pd(load!(chords.midpoint[$i], $c), midpoint[$i])
+            };
         }
         for c in 0..chunks {
             let (w, u) = weights!(c);
@@ -1273,7 +1203,7 @@ impl FitWindow {
                     p = _mm256_mul_pd(p, u);
                 }
             }
-            let mut p = _mm256_mul_pd(w, load!(self.y[0], c));
+            let mut p = _mm256_mul_pd(w, offset!(0, c));
             for (m, r) in rhs0.iter_mut().enumerate() {
                 *r = _mm256_add_pd(*r, p);
                 if m + 1 < FIT_TERMS {
@@ -1285,7 +1215,8 @@ impl FitWindow {
         for c in 0..chunks {
             let (w, u) = weights!(c);
             for (i, rhs) in rhs12.iter_mut().enumerate() {
-                let mut p = _mm256_mul_pd(w, load!(self.y[i + 1], c));
+                let y = if i == 0 { offset!(1, c) } else { offset!(2, c) };
+                let mut p = _mm256_mul_pd(w, y);
                 for (m, r) in rhs.iter_mut().enumerate() {
                     *r = _mm256_add_pd(*r, p);
                     if m + 1 < FIT_TERMS {
@@ -1308,75 +1239,9 @@ impl FitWindow {
         out
     }
 
-    fn new() -> FitWindow {
-        FitWindow {
-            x: [0.0; FIT_SLOTS],
-            y: [[0.0; FIT_SLOTS]; 3],
-            start: 0,
-            used: 0,
-            reach: 0.0,
-        }
-    }
-
-    /// The midpoints of `chords[at]` and of `side` chords on each side,
-    /// relative to the first's, into this window from slot 0 (reach
-    /// unset), zeros to the end of the last lane: the window plainly,
-    /// which the tests hold [`walk_into`](Self::walk_into)'s to.
-    #[cfg(test)]
-    fn gather_into(&mut self, chords: &VecDeque<Chord>, at: usize, side: usize) {
-        let centre = &chords[at];
-        self.start = 0;
-        self.used = 2 * side + 1;
-        for (k, c) in chords.range(at - side..=at + side).enumerate() {
-            self.x[k] = c.station - centre.station;
-            for i in 0..3 {
-                self.y[i][k] = c.midpoint[i] - centre.midpoint[i];
-            }
-        }
-        for k in self.used..self.used.next_multiple_of(FIT_LANES) {
-            self.x[k] = 0.0;
-            for i in 0..3 {
-                self.y[i][k] = 0.0;
-            }
-        }
-    }
-
-    /// [`fit_side`] and [`gather_into`](Self::gather_into) in one walk
-    /// along the chords, which both read: each midpoint goes into its
-    /// slot about a centre slot FIT_SIDE as it is accepted, and the
-    /// window starts where the shorter side ends. The slots from `start`
-    /// hold what `gather_into` writes from 0, and the sums' lanes start
-    /// there, so the fit is the same to the bit. Returns how many chords
-    /// on each side the window takes (`most` at most, which is at most
-    /// FIT_SIDE).
-    fn walk_into(&mut self, chords: &VecDeque<Chord>, at: usize, end: usize, most: usize) -> usize {
-        const CENTRE: usize = FIT_SIDE;
-        let centre = &chords[at];
-        let mut put = |k: usize, c: &Chord| {
-            self.x[k] = c.station - centre.station;
-            for i in 0..3 {
-                self.y[i][k] = c.midpoint[i] - centre.midpoint[i];
-            }
-        };
-        put(CENTRE, centre);
-        let side = fit_side(chords, at, end, most.min(FIT_SIDE), |k, c| {
-            put(CENTRE.wrapping_add_signed(k), c)
-        });
-        self.start = CENTRE - side;
-        self.used = 2 * side + 1;
-        let lanes_end = self.start + self.used.next_multiple_of(FIT_LANES);
-        for k in self.start + self.used..lanes_end {
-            self.x[k] = 0.0;
-            for i in 0..3 {
-                self.y[i][k] = 0.0;
-            }
-        }
-        side
-    }
-
     /// Path length from the centre to the farther outermost midpoint, mm.
     fn extent(&self) -> f64 {
-        (-self.x[self.start]).max(self.x[self.start + self.used.max(1) - 1])
+        (-self.x(0)).max(self.x(self.used.max(1) - 1))
     }
 
     /// The curve that dense chords sample, near the centre midpoint: the
@@ -1396,10 +1261,7 @@ impl FitWindow {
     fn solve(&self) -> Option<[[f64; 3]; FIT_TERMS]> {
         let used = self.used;
         let reach = self.reach;
-        if used == 0
-            || self.start + used.next_multiple_of(FIT_LANES) > FIT_SLOTS
-            || reach.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
-        {
+        if used == 0 || reach.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         let scale = 1.0 / reach;
@@ -1418,39 +1280,7 @@ impl FitWindow {
         };
         #[cfg(not(target_arch = "x86_64"))]
         let sums = self.sums_lanes(used, scale);
-        let (moments, rhs) = (sums.moments, sums.rhs);
-        let total = |a: &Lanes| (a[0] + a[1]) + (a[2] + a[3]);
-        let mut m = [[0.0; FIT_TERMS + 3]; FIT_TERMS];
-        for row in 0..FIT_TERMS {
-            for col in 0..FIT_TERMS {
-                m[row][col] = total(&moments[row + col]);
-            }
-            for i in 0..3 {
-                m[row][FIT_TERMS + i] = total(&rhs[i][row]);
-            }
-        }
-        // Gaussian elimination; the matrix is positive definite (at least
-        // five distinct points), so no pivoting is needed.
-        for p in 0..FIT_TERMS {
-            // (NaN fails too.)
-            if m[p][p].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                return None;
-            }
-            for row in p + 1..FIT_TERMS {
-                let f = m[row][p] / m[p][p];
-                for col in p..FIT_TERMS + 3 {
-                    m[row][col] -= f * m[p][col];
-                }
-            }
-        }
-        let mut coef = [[0.0f64; 3]; FIT_TERMS];
-        for p in (0..FIT_TERMS).rev() {
-            for i in 0..3 {
-                let known: f64 = (p + 1..FIT_TERMS).map(|k| m[p][k] * coef[k][i]).sum();
-                coef[p][i] = (m[p][FIT_TERMS + i] - known) / m[p][p];
-            }
-        }
-        Some(coef)
+        solve_sums(&sums)
     }
 
     /// The frame at the centre midpoint of the fitted cubic ([`solve`](Self::solve)),
@@ -1463,6 +1293,44 @@ impl FitWindow {
         let c2: [f64; 3] = std::array::from_fn(|i| 2.0 * coef[2][i] / (reach * reach));
         frame_from_derivatives(coef[0], c1, c2)
     }
+}
+
+/// The cubic's coefficients from its normal equations in partial sums
+/// ([`FitWindow::solve`]).
+fn solve_sums(sums: &FitSums) -> Option<[[f64; 3]; FIT_TERMS]> {
+    let (moments, rhs) = (&sums.moments, &sums.rhs);
+    let total = |a: &Lanes| (a[0] + a[1]) + (a[2] + a[3]);
+    let mut m = [[0.0; FIT_TERMS + 3]; FIT_TERMS];
+    for row in 0..FIT_TERMS {
+        for col in 0..FIT_TERMS {
+            m[row][col] = total(&moments[row + col]);
+        }
+        for i in 0..3 {
+            m[row][FIT_TERMS + i] = total(&rhs[i][row]);
+        }
+    }
+    // Gaussian elimination; the matrix is positive definite (at least
+    // five distinct points), so no pivoting is needed.
+    for p in 0..FIT_TERMS {
+        // (NaN fails too.)
+        if m[p][p].partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        for row in p + 1..FIT_TERMS {
+            let f = m[row][p] / m[p][p];
+            for col in p..FIT_TERMS + 3 {
+                m[row][col] -= f * m[p][col];
+            }
+        }
+    }
+    let mut coef = [[0.0f64; 3]; FIT_TERMS];
+    for p in (0..FIT_TERMS).rev() {
+        for i in 0..3 {
+            let known: f64 = (p + 1..FIT_TERMS).map(|k| m[p][k] * coef[k][i]).sum();
+            coef[p][i] = (m[p][FIT_TERMS + i] - known) / m[p][p];
+        }
+    }
+    Some(coef)
 }
 
 /// Shortest time, s, over a line of `length` mm entered and left at speed
@@ -1769,7 +1637,7 @@ impl<'k> Planner<'k> {
             pending: VecDeque::new(),
             ready: VecDeque::new(),
             merge: CollinearMerge::new(),
-            chords: VecDeque::new(),
+            chords: Chords::new(),
             behind: 0,
             released: 0,
             ahead: config.blend_worker.then(ahead::Ahead::start).flatten(),
@@ -2239,8 +2107,8 @@ impl<'k> Planner<'k> {
             return;
         }
         self.released += 1;
-        if self.chords[self.behind].is_break() {
-            self.chords.drain(..=self.behind);
+        if self.chords.is_break(self.behind) {
+            self.chords.drain_front(self.behind + 1);
             self.behind = 0;
         } else if self.behind == FIT_SIDE {
             self.chords.pop_front();
@@ -2253,7 +2121,7 @@ impl<'k> Planner<'k> {
     /// Queue a waiting move, with its chord for the curve fit.
     fn push_pending(&mut self, pending: Pending) {
         let line = pending.programmed().filter(|p| p.xyz_only);
-        let chord = line.map_or(Chord::BREAK, |p| Chord::of(p, self.chords.back()));
+        let chord = line.map_or(Chord::BREAK, |p| Chord::of(p, self.chords.back().as_ref()));
         if let Some(ahead) = &mut self.ahead {
             ahead.push(match line {
                 Some(&line) => ahead::Move::Line {
@@ -3862,53 +3730,112 @@ mod tests {
         // with moves too short for any blend to fit the tolerance.
         assert!(blends >= 24 * 15 * 3 / 4, "{blends} blends");
     }
+    /// The bits of a fit's partial sums, in order.
+    fn sum_bits(s: &FitSums) -> Vec<u64> {
+        let rhs = s.rhs.iter().flatten();
+        s.moments
+            .iter()
+            .chain(rhs)
+            .flatten()
+            .map(|v| v.to_bits())
+            .collect()
+    }
+
+    /// The window over the `used` chords from chord `from` on, centred
+    /// on the middle one (reach unset).
+    fn window_over(chords: &Chords, from: usize, used: usize) -> FitWindow<'_> {
+        let centre = from + used / 2;
+        FitWindow {
+            chords,
+            first: chords.slot(from),
+            used,
+            station: chords.station(centre),
+            midpoint: chords.midpoint(centre),
+            reach: 0.0,
+        }
+    }
+
     #[test]
     fn the_fits_avx_sums_are_its_plain_sums_bit_for_bit() {
         // Plans must not depend on the processor they were made on.
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             let mut rand = crate::testkit::uniform(7);
-            // Windows from slot 0 (`gather_into`) and from any other
-            // (`walk_into`), whose lanes start there.
-            let windows = (0..4).flat_map(|start| {
-                (1..=FIT_SLOTS - start)
-                    .filter(move |used| start + used.next_multiple_of(FIT_LANES) <= FIT_SLOTS)
-                    .map(move |used| (start, used))
-            });
-            for (start, used) in windows {
-                let mut w = FitWindow::new();
-                // Slots outside the window hold what earlier ones left.
-                w.x.fill(f64::NAN);
-                w.start = start;
-                w.used = used;
-                for k in start..start + used.next_multiple_of(FIT_LANES) {
-                    let inside = k < start + used;
-                    w.x[k] = if inside {
-                        ((k - start) as f64 - used as f64 / 2.0) * 0.02 + 1e-3 * rand()
-                    } else {
-                        0.0
-                    };
-                    for i in 0..3 {
-                        w.y[i][k] = if inside { 0.3 * rand() - 0.15 } else { 0.0 };
-                    }
+            let mut chords = Chords::new();
+            // Some dropped first, so that the chords start past the
+            // fields' first slot.
+            for k in 0..140 {
+                chords.push_back(Chord {
+                    midpoint: [0.3 * rand() - 0.15, 0.3 * rand() - 0.15, rand()],
+                    direction: [1.0, 0.0, 0.0],
+                    length: 0.02,
+                    station: k as f64 * 0.02 + 1e-3 * rand(),
+                    corner: false,
+                });
+            }
+            chords.drain_front(3);
+            let n = chords.len();
+            // Windows from the first chord on, from the next three (each
+            // group of four starts elsewhere), and ending at the last
+            // chord (the last group reads the zeros after it).
+            for used in 1..=2 * FIT_SIDE + 1 {
+                for from in [0, 1, 2, 3, n - used] {
+                    let w = window_over(&chords, from, used);
+                    let scale = 1.0 / (0.03 * used as f64);
+                    let plain = w.sums_lanes(used, scale);
+                    // SAFETY: the processor supports AVX, checked above.
+                    let avx = unsafe { w.sums_avx(used, scale) };
+                    assert_eq!(sum_bits(&plain), sum_bits(&avx), "{used} from {from}");
+                    assert!(plain.moments[0].iter().sum::<f64>() > 0.0);
                 }
-                let scale = 1.0 / (0.03 * used as f64);
-                let plain = w.sums_lanes(used, scale);
-                // SAFETY: the processor supports AVX, checked above.
-                let avx = unsafe { w.sums_avx(used, scale) };
-                let bits = |s: &FitSums| -> Vec<u64> {
-                    let rhs = s.rhs.iter().flatten();
-                    s.moments
-                        .iter()
-                        .chain(rhs)
-                        .flatten()
-                        .map(|v| v.to_bits())
-                        .collect()
-                };
-                assert_eq!(bits(&plain), bits(&avx), "{used} slots from {start}");
-                assert!(plain.moments[0].iter().sum::<f64>() > 0.0);
             }
         }
+    }
+
+    /// The fit's partial sums as the window was gathered before it read
+    /// the chords' fields: the offsets copied out, zeros after the last
+    /// to the end of its group of four, summed in the same order. The
+    /// reference the fit is held to.
+    fn gathered_sums(w: &FitWindow, scale: f64) -> FitSums {
+        let lanes = w.used.next_multiple_of(FIT_LANES);
+        let x: Vec<f64> = (0..lanes)
+            .map(|k| if k < w.used { w.x(k) } else { 0.0 })
+            .collect();
+        let y: Vec<[f64; 3]> = (0..lanes)
+            .map(|k| {
+                std::array::from_fn(|i| {
+                    if k < w.used {
+                        w.chords.midpoint[i][w.first + k] - w.midpoint[i]
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        let mut s = FitSums {
+            moments: [[0.0; FIT_LANES]; 2 * FIT_TERMS - 1],
+            rhs: [[[0.0; FIT_LANES]; FIT_TERMS]; 3],
+        };
+        for k in 0..lanes {
+            let l = k % FIT_LANES;
+            let u = x[k] * scale;
+            let r = u.abs().min(1.0);
+            let f = 1.0 - r * r * r;
+            let weight = f * f * f * if k < w.used { 1.0 } else { 0.0 };
+            let mut p = weight;
+            for moment in s.moments.iter_mut() {
+                moment[l] += p;
+                p *= u;
+            }
+            for i in 0..3 {
+                let mut p = weight * y[k][i];
+                for rhs in s.rhs[i].iter_mut() {
+                    rhs[l] += p;
+                    p *= u;
+                }
+            }
+        }
+        s
     }
 
     #[test]
@@ -3916,38 +3843,10 @@ mod tests {
         // Chords of random lengths (some past FIT_REACH's share) turning
         // by random amounts (some past FIT_BEND, some past FIT_TURN in
         // all), with breaks: windows of every shape the walk can stop at.
-        let mut rand = crate::testkit::uniform(11);
-        let mut chords: VecDeque<Chord> = VecDeque::new();
-        let (mut p, mut heading) = ([0.0f64; 3], 0.0f64);
-        for n in 0..3000 {
-            if n % 700 == 350 {
-                chords.push_back(Chord::BREAK);
-                continue;
-            }
-            let length = if rand() < 0.05 {
-                0.2 * rand()
-            } else {
-                0.01 + 0.03 * rand()
-            };
-            heading += if rand() < 0.02 {
-                0.3
-            } else {
-                0.04 * (rand() - 0.5)
-            };
-            let direction = [heading.cos(), heading.sin(), 0.0];
-            let end: [f64; 3] = std::array::from_fn(|i| p[i] + length * direction[i]);
-            let line = Line {
-                start: std::array::from_fn(|i| if i < 3 { p[i] } else { 0.0 }),
-                end: std::array::from_fn(|i| if i < 3 { end[i] } else { 0.0 }),
-            };
-            let programmed = Programmed::new(line);
-            chords.push_back(Chord::of(&programmed, chords.back()));
-            p = end;
-        }
-        let (mut walked, mut gathered) = (FitWindow::new(), FitWindow::new());
+        let chords = chords::tests::random_chords(11, 3000);
         let mut fitted = 0;
         for at in 1..chords.len() - 1 {
-            if chords[at].is_break() {
+            if chords.is_break(at) {
                 continue;
             }
             // Windows that see every chord after, and only a few; of
@@ -3957,16 +3856,20 @@ mod tests {
                 .into_iter()
                 .flat_map(|e| [(e, POINT_SIDE), (e, FIT_SIDE)])
             {
-                let side = fit_side(&chords, at, end, most, |_, _| {});
-                assert_eq!(walked.walk_into(&chords, at, end, most), side, "at {at}");
-                gathered.gather_into(&chords, at, side);
-                assert_eq!(walked.used, gathered.used);
-                assert_eq!(walked.extent().to_bits(), gathered.extent().to_bits());
+                let (mut w, side) = FitWindow::walk(&chords, at, end, most);
+                assert_eq!(w.used, 2 * side + 1);
+                assert_eq!(w.x(side), 0.0, "at {at}: the centre");
                 if side < FIT_MIN_SIDE {
                     continue;
                 }
-                walked.reach = 1.25 * walked.extent();
-                gathered.reach = walked.reach;
+                w.reach = 1.25 * w.extent();
+                let scale = 1.0 / w.reach;
+                let gathered = gathered_sums(&w, scale);
+                assert_eq!(
+                    sum_bits(&w.sums_lanes(w.used, scale)),
+                    sum_bits(&gathered),
+                    "at {at}"
+                );
                 let bits = |c: Option<[[f64; 3]; FIT_TERMS]>| {
                     c.map(|c| {
                         c.as_flattened()
@@ -3975,33 +3878,33 @@ mod tests {
                             .collect::<Vec<_>>()
                     })
                 };
-                assert_eq!(bits(walked.solve()), bits(gathered.solve()), "at {at}");
+                assert_eq!(bits(w.solve()), bits(solve_sums(&gathered)), "at {at}");
                 fitted += 1;
             }
         }
         assert!(fitted > 2000, "{fitted} windows fitted");
     }
 
-    /// A window of the midpoints of chords of `chord` mm inscribed in a
-    /// circle of radius `r`, `side` on each side of the centre one.
-    fn circle_window(r: f64, chord: f64, side: usize) -> (FitWindow, f64) {
+    /// The midpoints of chords of `chord` mm inscribed in a circle of
+    /// radius `r`, `side` on each side of the one at angle 0, and the
+    /// radius of the circle they lie on.
+    fn circle_chords(r: f64, chord: f64, side: usize) -> (Chords, f64) {
         let step = 2.0 * (chord / (2.0 * r)).asin();
         // Midpoints lie on a circle of radius r·cos(step/2), a path
         // length of `chord` apart along the polygon.
         let rm = r * (step / 2.0).cos();
-        let mid = |k: f64| [rm * (k * step).cos(), rm * (k * step).sin(), 0.0];
-        let centre = mid(0.0);
-        let mut w = FitWindow::new();
-        w.used = 2 * side + 1;
-        for (k, n) in (-(side as i32)..=side as i32).enumerate() {
-            let p = mid(n as f64);
-            w.x[k] = n as f64 * chord;
-            for i in 0..3 {
-                w.y[i][k] = p[i] - centre[i];
-            }
+        let mut chords = Chords::new();
+        for n in -(side as i32)..=side as i32 {
+            let angle = n as f64 * step;
+            chords.push_back(Chord {
+                midpoint: [rm * angle.cos(), rm * angle.sin(), 0.0],
+                direction: [-angle.sin(), angle.cos(), 0.0],
+                length: chord,
+                station: n as f64 * chord,
+                corner: false,
+            });
         }
-        w.reach = 1.25 * w.extent();
-        (w, rm)
+        (chords, rm)
     }
 
     #[test]
@@ -4014,7 +3917,9 @@ mod tests {
             (30.0, 0.02, 24),
             (1.25, 0.02, 24),
         ] {
-            let (w, rm) = circle_window(r, chord, side);
+            let (chords, rm) = circle_chords(r, chord, side);
+            let mut w = window_over(&chords, 0, 2 * side + 1);
+            w.reach = 1.25 * w.extent();
             let f = w.fit().expect("a fit");
             // The centre midpoint is at angle 0: (rm, 0) with tangent +Y
             // and curvature 1/rm toward the centre.
@@ -4045,14 +3950,14 @@ mod tests {
 
     /// The chords of the polyline through `vertices`, as the planner
     /// queues them for the curve fit ([`Chord::of`]).
-    fn chords_through(vertices: &[[f64; 3]]) -> VecDeque<Chord> {
-        let mut chords: VecDeque<Chord> = VecDeque::new();
+    fn chords_through(vertices: &[[f64; 3]]) -> Chords {
+        let mut chords = Chords::new();
         for w in vertices.windows(2) {
             let line = Programmed::new(Line {
                 start: std::array::from_fn(|i| if i < 3 { w[0][i] } else { 0.0 }),
                 end: std::array::from_fn(|i| if i < 3 { w[1][i] } else { 0.0 }),
             });
-            let chord = Chord::of(&line, chords.back());
+            let chord = Chord::of(&line, chords.back().as_ref());
             chords.push_back(chord);
         }
         chords

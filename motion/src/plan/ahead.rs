@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 
 use super::{
     blend_legs, blend_near, corner_legs, fitted_frame, frame_on, hairpin, vertex_midpoint,
-    xyz_frame, Chord, FittedPoints, FrameXyz, PathMode, Programmed, CORNER_TRIES, FIT_SIDE,
+    xyz_frame, Chord, Chords, FittedPoints, FrameXyz, PathMode, Programmed, CORNER_TRIES, FIT_SIDE,
 };
 use crate::path::{Blend, BlendExtremes, Frame};
 
@@ -609,7 +609,7 @@ struct Worker {
     shared: Arc<Shared>,
     /// Moves from index `first` on, with their chords.
     moves: VecDeque<Move>,
-    chords: VecDeque<Chord>,
+    chords: Chords,
     first: u64,
     /// Where the planner flushed: the number of moves queued then.
     flushes: VecDeque<u64>,
@@ -649,7 +649,7 @@ impl Worker {
         Worker {
             shared,
             moves: VecDeque::new(),
-            chords: VecDeque::new(),
+            chords: Chords::new(),
             first: 0,
             flushes: VecDeque::new(),
             next: 1,
@@ -753,7 +753,7 @@ impl Worker {
         match input {
             Input::Move(m) => {
                 let chord = match &m {
-                    Move::Line { line, .. } => Chord::of(line, self.chords.back()),
+                    Move::Line { line, .. } => Chord::of(line, self.chords.back().as_ref()),
                     Move::Other => {
                         self.last_break = Some(self.first + self.moves.len() as u64);
                         Chord::BREAK
@@ -818,7 +818,7 @@ impl Worker {
         last_fit: &mut Option<(u64, Option<Frame>)>,
         points: &mut FittedPoints,
         moves: &VecDeque<Move>,
-        chords: &VecDeque<Chord>,
+        chords: &Chords,
         first: u64,
         index: u64,
         end: u64,
