@@ -83,7 +83,7 @@ pub(super) struct Chords {
     head: usize,
     len: usize,
     pub(super) station: Vec<f64>,
-    pub(super) length: Vec<f64>,
+    length: Vec<f64>,
     /// 1 where the chord is a corner, 0 where not.
     corner: Vec<f64>,
     direction: [Vec<f64>; 3],
