@@ -1125,22 +1125,16 @@ impl<'c> FitWindow<'c> {
         const _: () = assert!(FIT_LANES == 4);
         let chords = self.chords;
         let chunks = used.div_ceil(4);
-        // Every field is as long as the stations (checked once, here,
-        // rather than at every load).
+        // The last group of four ends within the fields (checked once,
+        // here, rather than at every load).
         let end = self.first + 4 * chunks;
-        assert!(
-            end <= chords.station.len()
-                && chords
-                    .midpoint
-                    .iter()
-                    .all(|m| m.len() == chords.station.len())
-        );
+        assert!(end <= chords.storage(), "a fit's window within its chords");
         let first = self.first;
         // Not closures: they would not inherit this function's AVX.
         macro_rules! load {
             ($a:expr, $c:expr) => {{
                 // SAFETY: first + 4·c + 3 < end, within every field
-                // (asserted above).
+                // (asserted above: `Chords::storage`).
                 unsafe { _mm256_loadu_pd($a.as_ptr().add(first + $c * 4)) }
             }};
         }

@@ -81,7 +81,6 @@ const COMPACT: usize = 4096;
 #[derive(Clone, Debug)]
 pub(super) struct Chords {
     head: usize,
-    len: usize,
     pub(super) station: Vec<f64>,
     length: Vec<f64>,
     /// 1 where the chord is a corner, 0 where not.
@@ -95,7 +94,6 @@ impl Chords {
         let padded = || vec![0.0; PAD];
         Chords {
             head: 0,
-            len: 0,
             station: padded(),
             length: padded(),
             corner: padded(),
@@ -105,13 +103,31 @@ impl Chords {
     }
 
     pub fn len(&self) -> usize {
-        self.len
+        self.station.len() - self.head - PAD
     }
 
     /// Where chord `k` is kept in the fields.
     pub(super) fn slot(&self, k: usize) -> usize {
-        debug_assert!(k < self.len);
+        debug_assert!(k < self.len());
         self.head + k
+    }
+
+    /// The length every field is kept at: the chords, the ones dropped
+    /// before them and [`PAD`] zeros after them. Checked here, once per
+    /// caller, so that loads of four numbers from any slot of a chord
+    /// need no check of their own.
+    pub(super) fn storage(&self) -> usize {
+        let storage = self.station.len();
+        let fields = [&self.length, &self.corner];
+        assert!(
+            fields
+                .into_iter()
+                .chain(&self.direction)
+                .chain(&self.midpoint)
+                .all(|f| f.len() == storage),
+            "the chords' fields are kept at one length"
+        );
+        storage
     }
 
     fn fields_mut(&mut self) -> [&mut Vec<f64>; 9] {
@@ -131,7 +147,7 @@ impl Chords {
     }
 
     pub fn push_back(&mut self, c: Chord) {
-        let at = self.head + self.len;
+        let at = self.head + self.len();
         let values = [
             c.station,
             c.length,
@@ -148,15 +164,13 @@ impl Chords {
             field[at] = value;
             field.push(0.0);
         }
-        self.len += 1;
     }
 
     /// Drop the `n` oldest chords.
     pub fn drain_front(&mut self, n: usize) {
-        assert!(n <= self.len, "dropping {n} of {} chords", self.len);
+        assert!(n <= self.len(), "dropping {n} of {} chords", self.len());
         self.head += n;
-        self.len -= n;
-        if self.head >= COMPACT && self.head >= self.len {
+        if self.head >= COMPACT && self.head >= self.len() {
             let head = self.head;
             for field in self.fields_mut() {
                 field.copy_within(head.., 0);
@@ -183,7 +197,7 @@ impl Chords {
     }
 
     pub fn back(&self) -> Option<Chord> {
-        self.len.checked_sub(1).map(|k| self.get(k))
+        self.len().checked_sub(1).map(|k| self.get(k))
     }
 
     pub fn is_break(&self, k: usize) -> bool {
@@ -231,7 +245,7 @@ pub(super) fn fit_side(chords: &Chords, at: usize, end: usize, most: usize) -> u
 }
 
 /// [`fit_side`] one chord at a time: the reference the AVX walk is held to.
-pub(super) fn fit_side_plain(chords: &Chords, at: usize, end: usize, most: usize) -> usize {
+fn fit_side_plain(chords: &Chords, at: usize, end: usize, most: usize) -> usize {
     let centre = chords.slot(at);
     let take = |slot: usize| chords.corner[slot] == 0.0 && chords.within(centre, slot);
     let after = (0..most.min(end.saturating_sub(at + 1)))
@@ -255,16 +269,8 @@ fn fit_side_avx(chords: &Chords, at: usize, end: usize, most: usize) -> usize {
     use std::arch::x86_64::*;
     let centre = chords.slot(at);
     // The loads below read four chords from a slot between the first
-    // chord and the last one's: every field is as long as the stations,
-    // with PAD ≥ 3 after the last chord (checked once, here).
-    let fields = chords.station.len();
-    assert!(
-        chords.head + chords.len + PAD == fields
-            && [&chords.length, &chords.corner]
-                .into_iter()
-                .chain(&chords.direction)
-                .all(|f| f.len() == fields)
-    );
+    // chord and the last one's, within the fields and their PAD ≥ 3.
+    let fields = chords.storage();
     macro_rules! load {
         ($field:expr, $slot:expr) => {{
             let slot: usize = $slot;
@@ -426,7 +432,8 @@ pub(super) mod tests {
             kept.drain(..drop);
             compactions += (chords.head < head) as usize;
             assert_eq!(chords.len(), kept.len());
-            assert!(chords.station.len() <= COMPACT.max(kept.len()) + kept.len() + PAD);
+            // Every field at one length, within a compaction's worth.
+            assert!(chords.storage() <= COMPACT.max(kept.len()) + kept.len() + PAD);
         }
         assert!(compactions >= 3, "{compactions} compactions");
         let same = |a: &Chord, b: &Chord| format!("{a:?}") == format!("{b:?}");
