@@ -26,7 +26,7 @@ use std::time::Instant;
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::{self, plan_program, RunConfig};
-use kerf_motion::schedule::{schedule, ScheduleConfig, Window};
+use kerf_motion::schedule::{schedule, Interpolant, ScheduleConfig, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig};
 
 /// One program's row, its schedule solved as `solve` says (the command's
@@ -57,11 +57,15 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
     let wall = t0.elapsed().as_secs_f64();
     let used = found.limit_use(kins).expect("mill3 has trivial kinematics");
     let time = found.scaled_time(&used);
-    let followed = found
-        .sampled(&segments, kins, planner.period)
-        .expect("mill3 has trivial kinematics");
+    let follow = |between| {
+        found
+            .sampled(&segments, kins, planner.period, between)
+            .expect("mill3 has trivial kinematics")
+    };
+    let followed = follow(Interpolant::QuinticInTime);
+    let by_length = follow(Interpolant::SpeedInLength);
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}  {:>10.3} s {:>5.3} {:>5.3} {:>6.3} {:>6.3} {:>4}",
         executor / bound,
         time / bound,
         executor / time,
@@ -76,6 +80,12 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         followed.limits.acceleration,
         followed.limits.jerk,
         followed.jerk_in_motion,
+        by_length.time,
+        by_length.limits.velocity,
+        by_length.limits.acceleration,
+        by_length.limits.jerk,
+        by_length.jerk_in_motion,
+        by_length.flattened,
     );
 }
 
@@ -118,7 +128,7 @@ fn main() {
     };
     println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}");
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4}",
         "program",
         "executor",
         "bound",
@@ -137,7 +147,13 @@ fn main() {
         "v@T",
         "a@T",
         "j@T",
-        "moving"
+        "moving",
+        "by length",
+        "v@T",
+        "a@T",
+        "j@T",
+        "moving",
+        "flat"
     );
     row(
         "circle R20, 0.05 mm chords",
@@ -171,6 +187,8 @@ fn main() {
     println!("(schedule times are slowed by any excess, the solver's tolerance, up to 1e-5)");
     println!("stops: stretches between stops, each its own linear programs; bad: programs the solver gave up on;");
     println!("win: windows solved / windows with no solution, followed by the one before to rest (0/0: each stretch whole)");
-    println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period, a quintic");
-    println!("  in time between nodes (Schedule::sampled); moving: the jerk away from stops, where the nodes' jerk rows hold");
+    println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period (Schedule::sampled),");
+    println!("  first a quintic in time between nodes, then (by length: its motion time) the speed as a function of arc");
+    println!("  length that the schedule's rows judge (Interpolant::SpeedInLength); moving: the jerk away from stops;");
+    println!("  flat: intervals followed at constant acceleration where that speed would dip towards rest");
 }

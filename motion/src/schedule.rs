@@ -16,21 +16,30 @@
 //! x = v². With u = ½·dx/ds (the path acceleration) and p′, p″, p‴ the
 //! path's derivatives in arc length, axis i moves at v·p′_i, accelerates
 //! at p′_i·u + p″_i·x and jerks at v·(p′_i·du/ds + 3·p″_i·u + p‴_i·x). The
-//! velocity and acceleration limits are linear in x (u and du/ds are
-//! finite differences of x). The jerk limit reads |p′_i·u′ + 3·p″_i·u +
+//! velocity limit is linear in x. Between the nodes the speed is the one
+//! [`Interpolant::SpeedInLength`] follows: x piecewise quadratic, u
+//! continuous and linear on each half interval, each node's u made of
+//! its neighbours' x, so that x, u and u′ anywhere are linear in the
+//! nodes' x (within a node, its neighbours and the node after next). The
+//! acceleration and jerk are judged where that motion has them, at each
+//! interval's ends and middle, which holds the speed between nodes to the
+//! limits too: judged at the nodes alone, by finite differences, the
+//! solutions zig-zagged from node to node and no motion through them kept
+//! the jerk limit (up to 3.7 times it at 1 ms samples). The jerk limit reads |p′_i·u′ + 3·p″_i·u +
 //! p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
 //! it, and with the tangent in its place the constraint is linear and
 //! stricter than the true one. Every solution of the linear program is
-//! therefore within the jerk limits (at the nodes), whatever x̄ was;
+//! therefore within the jerk limits (at those points), whatever x̄ was;
 //! solving again with x̄ the last solution moves the tangents to where
 //! the schedule is and lets it speed up. The objective is the first-order
 //! change of the cycle time about x̄ (weights ds/x̄^{3/2}), so that the
 //! program spends its freedom where the schedule is slow.
 //!
-//! The jerk constraint at a node holds with the tangent taken at that node
-//! and at both neighbours: otherwise one node dropped to rest would free
-//! its own constraint, a gap in the discretisation that no real motion
-//! has.
+//! Away from the stops x stays above [`MOVING_X`] at nodes and midpoints:
+//! otherwise a node dropped to rest frees its own jerk constraint (√x
+//! times anything is 0), a gap in the discretisation that no real motion
+//! has. (Before the motion between nodes was judged, the tangent was also
+//! taken at each node's neighbours to the same end.)
 //!
 //! Stops split the path into stretches solved one by one: exact stops,
 //! unblended corners, markers that stand still, program end. At junctions
@@ -38,19 +47,21 @@
 //! continuous time; the schedule passes them at the planner's own caps,
 //! v·|Δt_i| ≤ A_i·T and v²·|Δκ_i| ≤ J_i·T (T the servo period).
 //!
-//! What the result is worth. The limits hold at the nodes under the
-//! discretisation above, to the solver's tolerance (up to about 1e-5 where
-//! it reports reduced accuracy): [`Schedule::limit_use`] measures them
-//! there with the exact √x, and [`Schedule::scaled_time`] slows the whole
-//! schedule by the factor that brings it within every limit (velocity
-//! scales as 1/λ, acceleration 1/λ², jerk 1/λ³). The limits are not judged
-//! between nodes, nor on a 1 ms sampled motion as `kerf plan` judges the
-//! executor. Each linear program finds a local optimum of a non-convex
+//! What the result is worth. The limits hold at the judged points under
+//! the discretisation above, to the solver's tolerance (up to about 1e-5
+//! where it reports reduced accuracy): [`Schedule::limit_use`] measures
+//! them there with the exact √x, and [`Schedule::scaled_time`] slows the
+//! whole schedule by the factor that brings it within every limit
+//! (velocity scales as 1/λ, acceleration 1/λ², jerk 1/λ³). Followed in
+//! time by [`Interpolant::SpeedInLength`] and sampled at the servo period
+//! ([`Schedule::sampled`]), as `kerf plan` judges the executor, the
+//! motion keeps the limits on the samples too (`cargo bench --bench
+//! schedule`). Each linear program finds a local optimum of a non-convex
 //! problem, so the scaled time is an upper estimate of the optimum, not
 //! the optimum itself.
 //!
 //! Cost: each linear program is solved by an interior-point method whose
-//! Newton systems are pentadiagonal (`banded`), in time linear in the
+//! Newton systems are banded (`banded`), in time linear in the
 //! nodes: 4,400–15,000 nodes a second at six passes on this project's
 //! 2-core VM (`cargo bench --bench schedule`; fewest on one long
 //! stretch, as the circle's), about three times as fast as stellabee1.ngc
@@ -73,6 +84,10 @@ use crate::plan::{Segment, SegmentKind};
 /// Nodes next to a stop whose speed is capped by the ramp out of rest
 /// (see `linear_program`): the geometry there is taken as the stop's.
 const REST_NODES: usize = 8;
+
+/// Least x = v² (mm²/s²) the schedule keeps at nodes and midpoints more
+/// than [`REST_NODES`] from a stop, where the caps allow it.
+const MOVING_X: f64 = 1.0;
 
 /// Lower first guesses tried when the solver gives up on the first pass.
 const RETRIES: usize = 3;
@@ -101,13 +116,14 @@ pub struct ScheduleConfig {
 /// start from the speed and acceleration the windows before committed,
 /// and end at rest, so the schedule always has a way to rest within what
 /// has been solved. Of each window's solution the first `commit` nodes
-/// are kept; the next window starts two nodes before the first node not
-/// kept (those two fix its speed and acceleration).
+/// are kept; the next window starts three nodes before the first node not
+/// kept (those three fix its speed, acceleration and the motion between
+/// them).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Window {
     /// Nodes per window (at 0.01 mm, 100 per millimetre of path).
     pub horizon: usize,
-    /// Nodes kept of each window's solution: at least 3, less than
+    /// Nodes kept of each window's solution: at least 4, less than
     /// `horizon` (clamped into that range).
     pub commit: usize,
 }
@@ -155,6 +171,9 @@ struct Node {
     left: Geometry,
     /// Geometry at the start of the interval after.
     right: Geometry,
+    /// Geometry halfway along the interval after (unused where it has
+    /// no length).
+    mid: Geometry,
     /// Largest x = v² here, mm²/s².
     xmax: f64,
     /// Arc length of the interval to the next node, mm (0 after the last
@@ -379,6 +398,7 @@ impl Sampler {
                 self.nodes.push(Node {
                     left: first,
                     right: first,
+                    mid: first,
                     xmax: 0.0,
                     h: 0.0,
                     smooth: false,
@@ -390,11 +410,13 @@ impl Sampler {
         for k in 1..=n {
             let last = self.nodes.last_mut().expect("a node was pushed above");
             last.h = at(k) - at(k - 1);
+            last.mid = geometry(0.5 * (at(k) + at(k - 1)));
             let g = geometry(at(k));
             let xmax = self.velocity_cap(&g, feed);
             self.nodes.push(Node {
                 left: g,
                 right: g,
+                mid: g,
                 xmax,
                 h: 0.0,
                 smooth: true,
@@ -471,7 +493,7 @@ impl Sampler {
     /// One stretch window by window (see [`Window`]).
     fn windowed(&self, nodes: &[Node], window: Window, out: &mut Schedule) -> Vec<f64> {
         let m = nodes.len();
-        let commit = window.commit.clamp(3, window.horizon.max(4) - 1);
+        let commit = window.commit.clamp(4, window.horizon.max(5) - 1);
         let mut x = vec![0.0; m];
         // The window starts at node `begin`, in state `from`.
         let (mut begin, mut from) = (0, Start::Rest);
@@ -513,8 +535,8 @@ impl Sampler {
                     let keep = begin + commit;
                     x[begin..keep].copy_from_slice(&sol[..commit]);
                     last = Some((begin, sol));
-                    begin = keep - 2;
-                    from = Start::Moving([x[begin], x[begin + 1]]);
+                    begin = keep - 3;
+                    from = Start::Moving([x[begin], x[begin + 1], x[begin + 2]]);
                 }
                 None => {
                     // Nothing within the limits from the committed state:
@@ -573,7 +595,7 @@ impl Sampler {
             }
         }
         if let Start::Moving(fixed) = from {
-            guess[..2].copy_from_slice(&fixed);
+            guess[..3].copy_from_slice(&fixed);
         }
         guess
     }
@@ -613,7 +635,7 @@ impl Sampler {
                     *x *= 0.25;
                 }
                 if let Start::Moving(fixed) = from {
-                    guess[..2].copy_from_slice(&fixed);
+                    guess[..3].copy_from_slice(&fixed);
                 }
                 continue;
             };
@@ -643,7 +665,7 @@ impl Sampler {
         let m = nodes.len();
         match from {
             Start::Rest => x[0] = 0.0,
-            Start::Moving(fixed) => x[..2].copy_from_slice(&fixed),
+            Start::Moving(fixed) => x[..3].copy_from_slice(&fixed),
         }
         x[m - 1] = 0.0;
         for k in 0..m - 1 {
@@ -673,6 +695,7 @@ impl Sampler {
             Start::Rest => None,
             Start::Moving(fixed) => {
                 lp.fix_zero(1);
+                lp.fix_zero(2);
                 Some(fixed)
             }
         };
@@ -746,46 +769,71 @@ impl Sampler {
                 }
             }
         }
-        // Jerk at interior nodes: with slopes σ0 = (x_k − x_{k−1})/(2h0)
-        // and σ1 = (x_{k+1} − x_k)/(2h1), u = (σ0 + σ1)/2 and u′ = (σ1 −
-        // σ0)/((h0 + h1)/2); |t·u′ + 3c·u + d·x_k| ≤ J·L(x) with L the
-        // tangent of 1/√x at the guess of each of the three nodes.
+        // Jerk as the motion between nodes has it (`Interpolant::
+        // SpeedInLength`, which `JerkPoints` spells out), at both ends and
+        // the middle of every interval that starts and ends in motion:
+        // |t·u′ + 3c·u + d·x| ≤ J·L(x) with L the tangent of 1/√x at the
+        // point's guess.
         let top = guess.iter().copied().fold(0.0, f64::max);
         if top <= 0.0 {
             return Some(vec![0.0; m]);
         }
         let floor = (top * 1e-4).max(1e-9);
-        for k in 1..m - 1 {
-            let (h0, h1) = (nodes[k - 1].h, nodes[k].h);
-            if !nodes[k].smooth || h0 == 0.0 || h1 == 0.0 {
-                continue;
-            }
-            let g = &nodes[k].left;
-            let (w0, w1, wd) = (1.0 / (2.0 * h0), 1.0 / (2.0 * h1), 2.0 / (h0 + h1));
-            for i in 0..9 {
-                if !j_max[i].is_finite() || (g.t[i] == 0.0 && g.c[i] == 0.0 && g.d[i] == 0.0) {
-                    continue;
+        let rest_start = from == Start::Rest;
+        // Interval 0 is the ramp out of rest, or, in a window that starts
+        // moving, the window before's; the last is the ramp into rest.
+        for k in 1..m.saturating_sub(2) {
+            let points = JerkPoints::new(nodes, k, |i| (i == 0 && rest_start) || i + 1 == m);
+            let base = k - 1;
+            let value = |form: &[f64; 4]| -> f64 {
+                (0..4)
+                    .filter(|&o| form[o] != 0.0)
+                    .map(|o| form[o] * guess[base + o])
+                    .sum()
+            };
+            // Away from the stops the motion keeps a little speed, at the
+            // nodes and between them: where x all but vanishes its jerk
+            // rows (√x times the rest) say nothing, and the solutions
+            // then all but stopped and started again at full acceleration
+            // between two nodes, which the motion between them cannot do.
+            if k > REST_NODES && k + 1 + REST_NODES < m {
+                let least = MOVING_X.min(0.5 * nodes[k].xmax.min(nodes[k + 1].xmax));
+                for form in [points.x0, points.xm] {
+                    let terms: [(usize, f64); 4] = std::array::from_fn(|o| (base + o, -form[o]));
+                    rows.push(&terms, -least);
                 }
-                let (t, c3) = (g.t[i], 1.5 * g.c[i]);
-                let coef = [
-                    t * wd * w0 - c3 * w0,
-                    -t * wd * (w0 + w1) + c3 * (w0 - w1) + g.d[i],
-                    t * wd * w1 + c3 * w1,
-                ];
-                for at in [k - 1, k, k + 1] {
-                    let xb = guess[at].max(floor);
+            }
+            for point in points.points() {
+                for i in 0..9 {
+                    let g = point.geometry;
+                    if !j_max[i].is_finite() || (g.t[i] == 0.0 && g.c[i] == 0.0 && g.d[i] == 0.0) {
+                        continue;
+                    }
+                    let expr: [f64; 4] = std::array::from_fn(|o| {
+                        g.t[i] * point.slope[o] + 3.0 * g.c[i] * point.u[o] + g.d[i] * point.x[o]
+                    });
+                    let xb = value(&point.x).max(floor);
                     // L(x) = 3/(2√x̄) − x/(2·x̄^{3/2}).
                     let (l0, l1) = (1.5 / xb.sqrt(), 0.5 / (xb * xb.sqrt()));
                     for sign in [1.0, -1.0] {
-                        rows.push(
-                            &[
-                                (k - 1, sign * coef[0]),
-                                (k, sign * coef[1]),
-                                (k + 1, sign * coef[2]),
-                                (at, j_max[i] * l1),
-                            ],
-                            j_max[i] * l0,
-                        );
+                        let terms: [(usize, f64); 4] = std::array::from_fn(|o| {
+                            (base + o, sign * expr[o] + j_max[i] * l1 * point.x[o])
+                        });
+                        rows.push(&terms, j_max[i] * l0);
+                    }
+                }
+                // The axes' acceleration t·u + c·x there too.
+                for i in 0..9 {
+                    let g = point.geometry;
+                    if g.t[i] == 0.0 && g.c[i] == 0.0 {
+                        continue;
+                    }
+                    let expr: [f64; 4] =
+                        std::array::from_fn(|o| g.t[i] * point.u[o] + g.c[i] * point.x[o]);
+                    for sign in [1.0, -1.0] {
+                        let terms: [(usize, f64); 4] =
+                            std::array::from_fn(|o| (base + o, sign * expr[o]));
+                        rows.push(&terms, a_max[i]);
                     }
                 }
             }
@@ -809,10 +857,136 @@ impl Sampler {
             *x = x.max(0.0);
         }
         if let Some(fixed) = fixed {
-            x[..2].copy_from_slice(&fixed);
+            x[..3].copy_from_slice(&fixed);
         }
         x[m - 1] = 0.0;
         Some(x)
+    }
+}
+
+/// u = ½·dx/ds at node `j` as [`Interpolant::SpeedInLength`] takes it, as
+/// coefficients of x at nodes j − 1, j, j + 1: the end slope of a ramp to
+/// or from rest beside it, else the slopes of the intervals either side
+/// interpolated from their midpoints to the node. `rest(i)`: node i is a
+/// stop. (`LengthProfile::new` computes the same from values.)
+fn node_slope(nodes: &[Node], j: usize, rest: impl Fn(usize) -> bool) -> [f64; 3] {
+    let m = nodes.len();
+    let before = j >= 1 && nodes[j - 1].h > 0.0;
+    let after = j + 1 < m && nodes[j].h > 0.0;
+    let (h0, h1) = (
+        if before { nodes[j - 1].h } else { 0.0 },
+        if after { nodes[j].h } else { 0.0 },
+    );
+    let out_of_rest = before && rest(j - 1);
+    let into_rest = after && rest(j + 1);
+    match (out_of_rest, into_rest, before, after) {
+        (true, true, _, _) => [0.0, (1.0 / h0 - 1.0 / h1) / 3.0, 0.0],
+        (true, false, _, _) => [0.0, 2.0 / (3.0 * h0), 0.0],
+        (false, true, _, _) => [0.0, -2.0 / (3.0 * h1), 0.0],
+        (false, false, true, true) => {
+            let sum = h0 + h1;
+            [
+                -h1 / (2.0 * h0 * sum),
+                h1 / (2.0 * h0 * sum) - h0 / (2.0 * h1 * sum),
+                h0 / (2.0 * h1 * sum),
+            ]
+        }
+        (false, false, true, false) => [-0.5 / h0, 0.5 / h0, 0.0],
+        (false, false, false, true) => [0.0, -0.5 / h1, 0.5 / h1],
+        (false, false, false, false) => [0.0; 3],
+    }
+}
+
+/// A point of an interval where the jerk and acceleration of
+/// [`Interpolant::SpeedInLength`] are judged: its geometry, and x, u and
+/// u′ there as coefficients of x at the nodes k − 1 … k + 2 of interval k.
+struct JerkPoint<'n> {
+    geometry: &'n Geometry,
+    x: [f64; 4],
+    u: [f64; 4],
+    slope: [f64; 4],
+}
+
+/// The points of interval k (both its nodes in motion) where the motion
+/// between nodes is judged: its start, its middle (once with each half's
+/// u′) and its end. On each half u is linear, so u′ is constant, and x,
+/// u and the geometry vary only slowly between these points.
+struct JerkPoints<'n> {
+    nodes: &'n [Node],
+    k: usize,
+    x0: [f64; 4],
+    x1: [f64; 4],
+    xm: [f64; 4],
+    u0: [f64; 4],
+    um: [f64; 4],
+    u1: [f64; 4],
+    first_half: [f64; 4],
+    second_half: [f64; 4],
+}
+
+impl<'n> JerkPoints<'n> {
+    /// Interval `k` (k ≥ 1) of `nodes`; `rest(i)`: node i is a stop.
+    fn new(nodes: &'n [Node], k: usize, rest: impl Fn(usize) -> bool) -> JerkPoints<'n> {
+        let h = nodes[k].h;
+        let place = |form: [f64; 3], offset: usize| -> [f64; 4] {
+            std::array::from_fn(|o| {
+                if o >= offset && o < offset + 3 {
+                    form[o - offset]
+                } else {
+                    0.0
+                }
+            })
+        };
+        let u0 = place(node_slope(nodes, k, &rest), 0);
+        let u1 = place(node_slope(nodes, k + 1, rest), 1);
+        let slope = [0.0, -0.5 / h, 0.5 / h, 0.0];
+        // The middle's u chosen so that x meets the next node's.
+        let um: [f64; 4] = std::array::from_fn(|o| 2.0 * slope[o] - 0.5 * (u0[o] + u1[o]));
+        let x0 = [0.0, 1.0, 0.0, 0.0];
+        let x1 = [0.0, 0.0, 1.0, 0.0];
+        let xm = std::array::from_fn(|o| x0[o] + 0.5 * h * (u0[o] + um[o]));
+        JerkPoints {
+            nodes,
+            k,
+            x0,
+            x1,
+            xm,
+            u0,
+            um,
+            u1,
+            first_half: std::array::from_fn(|o| 2.0 * (um[o] - u0[o]) / h),
+            second_half: std::array::from_fn(|o| 2.0 * (u1[o] - um[o]) / h),
+        }
+    }
+
+    fn points(&self) -> [JerkPoint<'n>; 4] {
+        let (here, next) = (&self.nodes[self.k], &self.nodes[self.k + 1]);
+        [
+            JerkPoint {
+                geometry: &here.right,
+                x: self.x0,
+                u: self.u0,
+                slope: self.first_half,
+            },
+            JerkPoint {
+                geometry: &here.mid,
+                x: self.xm,
+                u: self.um,
+                slope: self.first_half,
+            },
+            JerkPoint {
+                geometry: &here.mid,
+                x: self.xm,
+                u: self.um,
+                slope: self.second_half,
+            },
+            JerkPoint {
+                geometry: &next.left,
+                x: self.x1,
+                u: self.u1,
+                slope: self.second_half,
+            },
+        ]
     }
 }
 
@@ -832,18 +1006,18 @@ fn interval_time(h: f64, v0: f64, v1: f64) -> f64 {
 enum Start {
     /// At rest (x = 0 at the first node).
     Rest,
-    /// Moving, with x at the first two nodes fixed by the window before.
-    Moving([f64; 2]),
+    /// Moving, with x at the first three nodes fixed by the window before.
+    Moving([f64; 3]),
 }
 
-/// Constraint rows a·x ≤ b, built row by row, each within three
+/// Constraint rows a·x ≤ b, built row by row, each within four
 /// neighbouring nodes.
 struct Rows {
     lp: BandedLp,
-    /// x at columns 0 and 1, when fixed by the window before: their terms
+    /// x at columns 0, 1 and 2, when fixed by the window before: their terms
     /// move into the bound, and a row with nothing else, already kept by
     /// that window, is dropped.
-    fixed: Option<[f64; 2]>,
+    fixed: Option<[f64; 3]>,
 }
 
 impl Rows {
@@ -854,7 +1028,7 @@ impl Rows {
                 let mut free = [(0, 0.0); 4];
                 let (mut n, mut bound) = (0, bound);
                 for &(column, value) in terms {
-                    if column < 2 {
+                    if column < 3 {
                         bound -= value * fixed[column];
                     } else {
                         free[n] = (column, value);
@@ -867,8 +1041,9 @@ impl Rows {
                 self.lp.push(&free[..n], bound)
             }
         };
-        // Every row this module builds spans a node and its neighbours.
-        debug_assert!(banded.is_ok(), "a row beyond three neighbouring nodes");
+        // Every row this module builds spans at most four neighbouring
+        // nodes.
+        debug_assert!(banded.is_ok(), "a row beyond four neighbouring nodes");
     }
 
     fn solve(&self, objective: &[f64], scale: f64) -> Result<Vec<f64>, Failure> {
@@ -880,8 +1055,10 @@ impl Rows {
 /// executor following it would move the axes: see [`Schedule::sampled`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Sampled {
-    /// Motion time, s (dwells left out): the nodes' own, which the
-    /// playback keeps (each interval lasts as [`interval_time`] counts).
+    /// Motion time, s (dwells left out): each interval lasts as
+    /// [`interval_time`] counts it ([`Interpolant::QuinticInTime`]) or as
+    /// long as its speed in arc length takes ([`Interpolant::SpeedInLength`],
+    /// within a fraction of a per cent of the first).
     pub time: f64,
     /// Largest axis velocity, acceleration and jerk use, by finite
     /// differences of the sampled positions.
@@ -890,6 +1067,10 @@ pub struct Sampled {
     /// from a stop, where the schedule's own jerk rows hold (next to a
     /// stop it caps the speed by the ramp out of rest instead).
     pub jerk_in_motion: f64,
+    /// With [`Interpolant::SpeedInLength`]: intervals whose speed would
+    /// have dipped towards rest between the nodes, followed with constant
+    /// path acceleration instead (a step of acceleration at each end).
+    pub flattened: usize,
 }
 
 /// The path position `t` into an interval of duration `d` from (speed
@@ -904,6 +1085,241 @@ fn quintic_position(h: f64, d: f64, [v0, a0]: [f64; 2], [v1, a1]: [f64; 2], t: f
         (-30.0 * h + (14.0 * v1 + 16.0 * v0) * d + (3.0 * a0 - 2.0 * a1) * d2) / (2.0 * d3 * d);
     let c5 = (12.0 * h - 6.0 * (v1 + v0) * d - (a0 - a1) * d2) / (2.0 * d3 * d2);
     (t * (v0 + t * (0.5 * a0 + t * (c3 + t * (c4 + t * c5))))).clamp(0.0, h)
+}
+
+/// How a schedule's motion passes from node to node when it is followed
+/// in time ([`Schedule::sampled`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interpolant {
+    /// Each interval the quintic in time that meets both nodes' position,
+    /// speed and path acceleration (the acceleration at a node the
+    /// schedule's centred u, zero at rest), lasting as [`interval_time`]
+    /// counts it: the motion passes every node at its time and speed.
+    QuinticInTime,
+    /// The speed as a function of arc length, as the nodes' rows take it:
+    /// x = v² piecewise quadratic in s, its half-slope u = ½·dx/ds (the
+    /// path acceleration) continuous and linear on each half interval,
+    /// so that u′, which with u and x makes the jerk, is constant over
+    /// each node's stretch of path as its jerk row has it; out of rest and
+    /// into it the constant-jerk ramp x ∝ d^{4/3} that the nodes next to
+    /// a stop are capped by. Each interval's x meets both nodes' x, so the
+    /// time between them is the interval's own.
+    SpeedInLength,
+}
+
+/// Abscissae and weights of 8-point Gauss–Legendre quadrature on [−1, 1]
+/// (the positive half; the rule is symmetric).
+const GAUSS8: [(f64, f64); 4] = [
+    (0.183_434_642_495_649_8, 0.362_683_783_378_362),
+    (0.525_532_409_916_329, 0.313_706_645_877_887_3),
+    (0.796_666_477_413_626_7, 0.222_381_034_453_374_5),
+    (0.960_289_856_497_536_3, 0.101_228_536_290_376_3),
+];
+
+/// One interval of [`Interpolant::SpeedInLength`].
+#[derive(Clone, Copy, Debug)]
+enum Piece {
+    /// Out of rest: x = x1·(d/h)^{4/3}.
+    Out { x1: f64 },
+    /// Into rest: x = x0·((h − d)/h)^{4/3}.
+    In { x0: f64 },
+    /// u linear from `u0` at the start to `um` at the middle and on to
+    /// `u1` at the end; x starts at `x0`.
+    Smooth { x0: f64, u0: f64, um: f64, u1: f64 },
+    /// Both ends at rest: the stretch stands still.
+    Still,
+}
+
+/// The schedule's speed as a function of arc length, interval by
+/// interval ([`Interpolant::SpeedInLength`]).
+struct LengthProfile<'a> {
+    nodes: &'a [Node],
+    pieces: Vec<Piece>,
+    /// Intervals where x would have dipped below half its ends' least
+    /// value, taken linear in s instead (u constant, stepping at the
+    /// nodes).
+    flattened: usize,
+}
+
+impl<'a> LengthProfile<'a> {
+    fn new(nodes: &'a [Node], x: &[f64]) -> LengthProfile<'a> {
+        let n = nodes.len();
+        let h = |k: usize| nodes[k].h;
+        let interval = |k: usize| k + 1 < n && h(k) > 0.0;
+        let slope = |k: usize| (x[k + 1] - x[k]) / (2.0 * h(k));
+        // u at each node where the motion is under way: continuous with a
+        // ramp to or from rest beside it (the ramp's own end slope), else
+        // the midpoints' slopes interpolated to the node.
+        let u: Vec<f64> = (0..n)
+            .map(|k| {
+                if x[k] == 0.0 {
+                    return 0.0;
+                }
+                let before = (k > 0 && interval(k - 1)).then(|| k - 1);
+                let after = interval(k).then_some(k);
+                let out_of_rest = before.filter(|&b| x[b] == 0.0);
+                let into_rest = after.filter(|&a| x[a + 1] == 0.0);
+                match (out_of_rest, into_rest, before, after) {
+                    (Some(b), Some(a), _, _) => (x[k] / h(b) - x[k] / h(a)) / 3.0,
+                    (Some(b), None, _, _) => 2.0 * x[k] / (3.0 * h(b)),
+                    (None, Some(a), _, _) => -2.0 * x[k] / (3.0 * h(a)),
+                    (None, None, Some(b), Some(a)) => {
+                        (slope(b) * h(a) + slope(a) * h(b)) / (h(a) + h(b))
+                    }
+                    (None, None, Some(b), None) => slope(b),
+                    (None, None, None, Some(a)) => slope(a),
+                    (None, None, None, None) => 0.0,
+                }
+            })
+            .collect();
+        let flattened = std::cell::Cell::new(0);
+        let pieces = (0..n.saturating_sub(1))
+            .map(|k| match (x[k] > 0.0, x[k + 1] > 0.0) {
+                _ if h(k) == 0.0 => Piece::Still,
+                (false, false) => Piece::Still,
+                (false, true) => Piece::Out { x1: x[k + 1] },
+                (true, false) => Piece::In { x0: x[k] },
+                (true, true) => {
+                    let (u0, u1) = (u[k], u[k + 1]);
+                    // The middle chosen so that x meets the next node's.
+                    let um = 2.0 * slope(k) - 0.5 * (u0 + u1);
+                    let c = [x[k], u0, um, u1];
+                    // x is a quadratic on each half: its least value is
+                    // at an end or where u = 0 on a half.
+                    let lowest = Self::lowest(h(k), c);
+                    if lowest < 0.5 * x[k].min(x[k + 1]) {
+                        flattened.set(flattened.get() + 1);
+                        let m = slope(k);
+                        Piece::Smooth {
+                            x0: x[k],
+                            u0: m,
+                            um: m,
+                            u1: m,
+                        }
+                    } else {
+                        Piece::Smooth {
+                            x0: x[k],
+                            u0,
+                            um,
+                            u1,
+                        }
+                    }
+                }
+            })
+            .collect();
+        LengthProfile {
+            nodes,
+            pieces,
+            flattened: flattened.get(),
+        }
+    }
+
+    /// The least x over a smooth interval.
+    fn lowest(h: f64, [x0, u0, um, u1]: [f64; 4]) -> f64 {
+        let c = [x0, u0, um, u1];
+        let half = 0.5 * h;
+        let mut least = Self::x_smooth(h, c, 0.0)
+            .min(Self::x_smooth(h, c, half))
+            .min(Self::x_smooth(h, c, h));
+        // u = u0 + (um − u0)·d/half on the first half, zero at:
+        if (u0 > 0.0) != (um > 0.0) {
+            let d = half * u0 / (u0 - um);
+            least = least.min(Self::x_smooth(h, c, d));
+        }
+        if (um > 0.0) != (u1 > 0.0) {
+            let d = half + half * um / (um - u1);
+            least = least.min(Self::x_smooth(h, c, d));
+        }
+        least
+    }
+
+    /// x at `d` into the smooth interval of length `h`.
+    fn x_smooth(h: f64, [x0, u0, um, u1]: [f64; 4], d: f64) -> f64 {
+        let half = 0.5 * h;
+        if d <= half {
+            x0 + 2.0 * (u0 * d + (um - u0) * d * d / h)
+        } else {
+            let e = d - half;
+            let xm = x0 + half * (u0 + um);
+            xm + 2.0 * (um * e + (u1 - um) * e * e / h)
+        }
+    }
+
+    /// Time from the start of a smooth interval to `d` into it: ∫ ds/√x,
+    /// by Gauss–Legendre on each half (x is a quadratic on each).
+    fn t_smooth(h: f64, c: [f64; 4], d: f64) -> f64 {
+        let rule = |a: f64, b: f64| {
+            let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
+            GAUSS8
+                .iter()
+                .map(|&(z, w)| {
+                    let inv = |s: f64| 1.0 / Self::x_smooth(h, c, s).max(f64::MIN_POSITIVE).sqrt();
+                    w * (inv(mid - half * z) + inv(mid + half * z))
+                })
+                .sum::<f64>()
+                * half
+        };
+        let half = 0.5 * h;
+        if d <= half {
+            rule(0.0, d)
+        } else {
+            rule(0.0, half) + rule(half, d)
+        }
+    }
+
+    /// How long interval `k` lasts, s.
+    fn duration(&self, k: usize) -> f64 {
+        let h = self.nodes[k].h;
+        match self.pieces[k] {
+            Piece::Out { x1 } => 3.0 * h / x1.sqrt(),
+            Piece::In { x0 } => 3.0 * h / x0.sqrt(),
+            Piece::Smooth { x0, u0, um, u1 } => Self::t_smooth(h, [x0, u0, um, u1], h),
+            Piece::Still => f64::INFINITY,
+        }
+    }
+
+    /// Arc length into interval `k` at time `t` into it, searched from
+    /// `near` (an earlier sample's position in it, or 0).
+    fn position(&self, k: usize, t: f64, near: f64) -> f64 {
+        let h = self.nodes[k].h;
+        match self.pieces[k] {
+            // t = 3·h^{2/3}·d^{1/3}/√x1.
+            Piece::Out { x1 } => (h * (t * x1.sqrt() / (3.0 * h)).powi(3)).min(h),
+            Piece::In { x0 } => {
+                let left = (3.0 * h / x0.sqrt() - t).max(0.0);
+                h - (h * (left * x0.sqrt() / (3.0 * h)).powi(3)).min(h)
+            }
+            Piece::Smooth { x0, u0, um, u1 } => {
+                let c = [x0, u0, um, u1];
+                // Newton on t(d) = t, kept inside a bracket that bisection
+                // falls back on (t(d) rises with d).
+                let (mut low, mut high) = (near.clamp(0.0, h), h);
+                if Self::t_smooth(h, c, low) > t {
+                    low = 0.0;
+                }
+                let mut d = low;
+                for _ in 0..60 {
+                    let miss = Self::t_smooth(h, c, d) - t;
+                    if miss > 0.0 {
+                        high = d;
+                    } else {
+                        low = d;
+                    }
+                    let step = miss * Self::x_smooth(h, c, d).max(0.0).sqrt();
+                    let mut next = d - step;
+                    if !(next > low && next < high) {
+                        next = 0.5 * (low + high);
+                    }
+                    if (next - d).abs() <= 1e-15 * h.max(d) || high - low <= 1e-15 * h {
+                        return next;
+                    }
+                    d = next;
+                }
+                d
+            }
+            Piece::Still => 0.0,
+        }
+    }
 }
 
 impl Schedule {
@@ -922,23 +1338,14 @@ impl Schedule {
     /// (those it was made from) every `period`, s, and every axis's
     /// velocity, acceleration and jerk measured on them by finite
     /// differences against its limits, as `kerf plan` measures the
-    /// executor. The machine is at rest before and after.
-    ///
-    /// Between nodes the motion is the quintic in time that meets both
-    /// nodes' position, speed and path acceleration ([`quintic_position`];
-    /// the acceleration at a node is the schedule's centred u, zero at
-    /// rest), each interval lasting as [`interval_time`] counts it. So the
-    /// motion passes every node at its time and speed, and what the
-    /// nodes' limits leave between them shows here. (With the speed
-    /// linear in v² between nodes instead, constant acceleration, each
-    /// node's step of acceleration falls inside one period wherever an
-    /// interval lasts longer than one, and the jerk read up to 4.5 times
-    /// its limit.)
+    /// executor. The machine is at rest before and after. `between` says
+    /// how the motion passes from node to node ([`Interpolant`]).
     pub fn sampled(
         &self,
         segments: &[Segment],
         kins: &dyn Kinematics,
         period: f64,
+        between: Interpolant,
     ) -> Result<Sampled, ScheduleError> {
         let limits = axis_limits(kins)?;
         let nodes = &self.nodes;
@@ -961,6 +1368,11 @@ impl Schedule {
                 }
             })
             .collect();
+        let profile = match between {
+            Interpolant::QuinticInTime => None,
+            Interpolant::SpeedInLength => Some(LengthProfile::new(nodes, &x)),
+        };
+        out.flattened = profile.as_ref().map_or(0, |p| p.flattened);
         // Nodes from the nearest stop, counted both ways.
         let mut from_rest = vec![usize::MAX; n];
         for order in [false, true] {
@@ -1003,7 +1415,10 @@ impl Schedule {
                 continue;
             }
             let (v0, v1) = (self.v[k], self.v[k + 1]);
-            let lasts = interval_time(h, v0, v1);
+            let lasts = match &profile {
+                None => interval_time(h, v0, v1),
+                Some(profile) => profile.duration(k),
+            };
             if !lasts.is_finite() {
                 // A stretch that stands still: no motion to sample.
                 out.time = f64::INFINITY;
@@ -1012,9 +1427,17 @@ impl Schedule {
             let segment = &segments[nodes[k + 1].segment];
             let base = nodes[k + 1].at - h;
             let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
+            // Where the last sample was found, for the next one's search.
+            let mut near = 0.0;
             while samples as f64 * period <= begun + lasts {
                 let t = samples as f64 * period - begun;
-                let ds = quintic_position(h, lasts, [v0, accel[k]], [v1, accel[k + 1]], t);
+                let ds = match &profile {
+                    None => quintic_position(h, lasts, [v0, accel[k]], [v1, accel[k + 1]], t),
+                    Some(profile) => {
+                        near = profile.position(k, t, near);
+                        near
+                    }
+                };
                 // A sample's jerk spans it and the three before.
                 run = if in_motion { run + 1 } else { 0 };
                 see(segment.shape.point(base + ds), run >= 4, &mut out);
@@ -1032,10 +1455,12 @@ impl Schedule {
         Ok(out)
     }
 
-    /// Largest axis velocity, acceleration and jerk use at the nodes, with
-    /// the exact speed √x where the linear programs used its tangent. The
-    /// jerk is not judged on the nodes next to a stop, where its finite
-    /// differences are singular (v → 0) and the ramp cap holds instead.
+    /// Largest axis velocity, acceleration and jerk use at the nodes and,
+    /// for acceleration and jerk, at the ends and middle of every interval
+    /// as [`Interpolant::SpeedInLength`] moves through it, with the exact
+    /// speed √x where the linear programs used its tangent. The jerk is
+    /// not judged on the intervals out of a stop and into one, where the
+    /// motion is the constant-jerk ramp the rest cap bounds.
     pub fn limit_use(&self, kins: &dyn Kinematics) -> Result<ScheduleUse, ScheduleError> {
         let limits = axis_limits(kins)?;
         let nodes = &self.nodes;
@@ -1058,21 +1483,110 @@ impl Schedule {
                     use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
                 }
             }
-            if k == 0 || !nodes[k].smooth || nodes[k - 1].h == 0.0 {
+            // The jerk and acceleration between the nodes, where the motion
+            // is under way at both (next to a stop the ramp cap holds).
+            if k == 0 || x[k] == 0.0 || x[k + 1] == 0.0 {
                 continue;
             }
-            if x[k - 1] == 0.0 || x[k + 1] == 0.0 {
-                continue;
-            }
-            let (h0, h1) = (nodes[k - 1].h, nodes[k].h);
-            let (s0, s1) = (slope(k - 1), u);
-            let (um, du) = (0.5 * (s0 + s1), (s1 - s0) * 2.0 / (h0 + h1));
-            let g = &nodes[k].left;
-            for i in 0..9 {
-                let j = self.v[k] * (g.t[i] * du + 3.0 * g.c[i] * um + g.d[i] * x[k]);
-                use_.jerk = use_.jerk.max(j.abs() / limits.j[i]);
+            let points = JerkPoints::new(nodes, k, |i| x[i] == 0.0);
+            let value = |form: &[f64; 4]| -> f64 {
+                (0..4)
+                    .filter(|&o| form[o] != 0.0)
+                    .map(|o| form[o] * x[k - 1 + o])
+                    .sum()
+            };
+            for point in points.points() {
+                let g = point.geometry;
+                let (xp, u, slope) = (
+                    value(&point.x).max(0.0),
+                    value(&point.u),
+                    value(&point.slope),
+                );
+                for i in 0..9 {
+                    let j = xp.sqrt() * (g.t[i] * slope + 3.0 * g.c[i] * u + g.d[i] * xp);
+                    use_.jerk = use_.jerk.max(j.abs() / limits.j[i]);
+                    let a = g.t[i] * u + g.c[i] * xp;
+                    use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
+                }
             }
         }
         Ok(use_)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn node(h: f64) -> Node {
+        Node {
+            left: Geometry::default(),
+            right: Geometry::default(),
+            mid: Geometry::default(),
+            xmax: f64::INFINITY,
+            h,
+            smooth: true,
+            segment: 0,
+            at: 0.0,
+        }
+    }
+
+    /// The speed in arc length between two moving nodes meets both nodes'
+    /// x, keeps u continuous through the middle, takes as long as a fine
+    /// sum of ds/v says, and its clock inverts.
+    #[test]
+    fn an_interval_followed_by_length_meets_its_nodes_and_its_clock_inverts() {
+        let h = 0.01;
+        let x = [20.0, 30.0, 42.0, 50.0, 0.0];
+        let nodes: Vec<Node> = (0..x.len())
+            .map(|k| node(if k + 1 < x.len() { h } else { 0.0 }))
+            .collect();
+        let profile = LengthProfile::new(&nodes, &x);
+        assert_eq!(profile.flattened, 0);
+        let Piece::Smooth { x0, u0, um, u1 } = profile.pieces[1] else {
+            panic!(
+                "interval 1 is between moving nodes: {:?}",
+                profile.pieces[1]
+            );
+        };
+        let c = [x0, u0, um, u1];
+        assert_eq!(x0, x[1]);
+        assert!((LengthProfile::x_smooth(h, c, h) - x[2]).abs() < 1e-12);
+        // u (half the slope of x) the same either side of the middle.
+        let e = 1e-6 * h;
+        let left = (LengthProfile::x_smooth(h, c, 0.5 * h)
+            - LengthProfile::x_smooth(h, c, 0.5 * h - e))
+            / (2.0 * e);
+        let right = (LengthProfile::x_smooth(h, c, 0.5 * h + e)
+            - LengthProfile::x_smooth(h, c, 0.5 * h))
+            / (2.0 * e);
+        assert!(
+            (left - um).abs() < 1e-3 * um.abs() && (right - um).abs() < 1e-3 * um.abs(),
+            "{left} {right} {um}"
+        );
+        // Node 2's u, from its intervals' slopes, starts interval 2.
+        let Piece::Smooth { u0: next, .. } = profile.pieces[2] else {
+            panic!("interval 2 is between moving nodes");
+        };
+        assert_eq!(next, u1);
+        // The clock against a fine midpoint sum.
+        let n = 100_000;
+        let fine: f64 = (0..n)
+            .map(|i| {
+                let s = (i as f64 + 0.5) * h / n as f64;
+                h / n as f64 / LengthProfile::x_smooth(h, c, s).sqrt()
+            })
+            .sum();
+        let lasts = profile.duration(1);
+        assert!((lasts - fine).abs() < 1e-9 * fine, "{lasts} against {fine}");
+        for share in [0.1, 0.37, 0.5, 0.8, 0.999] {
+            let d = profile.position(1, share * lasts, 0.0);
+            let back = LengthProfile::t_smooth(h, c, d);
+            assert!((back - share * lasts).abs() < 1e-12, "{share}: {back}");
+        }
+        // Into the stop at the end: the constant-jerk ramp, 3h/v long.
+        assert!((profile.duration(3) - 3.0 * h / x[3].sqrt()).abs() < 1e-15);
+        let d = profile.position(3, profile.duration(3), 0.0);
+        assert!((d - h).abs() < 1e-15, "{d}");
     }
 }

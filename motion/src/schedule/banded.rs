@@ -1,13 +1,13 @@
-//! Linear programs whose constraint rows each touch at most three
-//! neighbouring unknowns, as the schedule's do (a node and its two
-//! neighbours), solved by a primal–dual interior-point method with
-//! Mehrotra's predictor–corrector.
+//! Linear programs whose constraint rows each touch at most [`WIDTH`]
+//! neighbouring unknowns, as the schedule's do (a node, its neighbours
+//! and, for the jerk between nodes, the node after next), solved by a
+//! primal–dual interior-point method with Mehrotra's predictor–corrector.
 //!
 //! Why not a general solver: each Newton step of an interior-point method
 //! solves the normal equations Gᵀ·W·G·Δx = r (W diagonal and positive).
-//! With every row of G inside three neighbouring columns, Gᵀ·W·G is
-//! pentadiagonal, so its LDLᵀ factorisation and both solves take time
-//! linear in the unknowns, and nothing but the rows and a few vectors is
+//! With every row of G inside [`WIDTH`] neighbouring columns, Gᵀ·W·G is
+//! banded ([`WIDTH`] − 1 diagonals each side), so its LDLᵀ factorisation
+//! and both solves take time linear in the unknowns, and nothing but the rows and a few vectors is
 //! stored. A general sparse solver (clarabel, which the schedule used
 //! until 2026-11-27, and which the tests below still check it against)
 //! orders, factors and refines a KKT system of rows and columns
@@ -26,6 +26,9 @@
 //! Scaling: rows enter divided by their largest coefficient and the
 //! unknowns by a scale the caller gives (about their largest value), so
 //! the tolerances below are relative.
+
+/// Neighbouring columns a row may span.
+pub(super) const WIDTH: usize = 4;
 
 /// Stop when the scaled primal residual, dual residual and duality gap
 /// are all below this.
@@ -52,15 +55,15 @@ const PIVOT: f64 = 1e-15;
 /// Refinement steps after each solve with the factors.
 const REFINE: usize = 1;
 
-/// `min c·x subject to G·x ≤ h`, each row of G nonzero only in three
-/// neighbouring columns.
+/// `min c·x subject to G·x ≤ h`, each row of G nonzero only in
+/// [`WIDTH`] neighbouring columns.
 #[derive(Clone, Debug, Default)]
 pub(super) struct BandedLp {
     columns: usize,
     /// First column of each row.
     first: Vec<usize>,
-    /// Each row's coefficients in columns first, first + 1, first + 2.
-    coef: Vec<[f64; 3]>,
+    /// Each row's coefficients in columns first, first + 1, ….
+    coef: Vec<[f64; WIDTH]>,
     /// Each row's bound.
     rhs: Vec<f64>,
     /// Columns held at zero.
@@ -72,8 +75,8 @@ pub(super) struct BandedLp {
 /// Why a linear program has no solution from [`BandedLp::solve`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Failure {
-    /// A row's terms span more than three neighbouring columns, or name
-    /// a column past the last.
+    /// A row's terms span more than [`WIDTH`] neighbouring columns, or
+    /// name a column past the last.
     NotBanded,
     /// A row reads 0 ≤ a negative bound (on its own, or once the columns
     /// held at zero drop out of it).
@@ -125,13 +128,13 @@ impl BandedLp {
             self.impossible |= bound < 0.0;
             return Ok(());
         }
-        if high >= self.columns || high - low > 2 {
+        if high >= self.columns || high - low >= WIDTH {
             return Err(Failure::NotBanded);
         }
-        // Rows near the last column start early enough to keep three
-        // columns in range (where there are three).
-        let first = low.min(self.columns.saturating_sub(3));
-        let mut coef = [0.0; 3];
+        // Rows near the last column start early enough to keep all their
+        // columns in range (where there are that many).
+        let first = low.min(self.columns.saturating_sub(WIDTH));
+        let mut coef = [0.0; WIDTH];
         for &(column, value) in terms {
             if value != 0.0 {
                 coef[column - first] += value;
@@ -161,9 +164,9 @@ impl BandedLp {
         };
         // Scaled rows: x = scale·y, each row divided by its largest
         // coefficient; rows left with nothing but held columns drop out.
-        // Two columns of padding, held at zero, so that every row's three
-        // columns are in range and the row loops need no tests.
-        let padded = n + 2;
+        // Columns of padding, held at zero, so that every row's columns
+        // are in range and the row loops need no tests.
+        let padded = n + WIDTH - 1;
         let mut held = vec![false; padded];
         held[n..].fill(true);
         for &column in &self.fixed {
@@ -175,7 +178,7 @@ impl BandedLp {
         let mut h = Vec::with_capacity(m);
         for r in 0..m {
             let f = self.first[r];
-            let row: [f64; 3] = std::array::from_fn(|i| {
+            let row: [f64; WIDTH] = std::array::from_fn(|i| {
                 if !held[f + i] {
                     self.coef[r][i] * scale
                 } else {
@@ -227,54 +230,44 @@ struct Scaled<'a> {
     /// Columns held at zero: no row touches them; their Newton step is 0.
     held: &'a [bool],
     first: &'a [usize],
-    g: &'a [[f64; 3]],
+    g: &'a [[f64; WIDTH]],
     h: &'a [f64],
     c: &'a [f64],
 }
 
-/// The pentadiagonal normal matrix Gᵀ·W·G, factored in place as L·D·Lᵀ
-/// (L unit lower triangular with two subdiagonals).
-struct Pentadiagonal {
-    /// The matrix as assembled (diagonal, first and second subdiagonal),
-    /// for iterative refinement.
-    m0: Vec<f64>,
-    m1: Vec<f64>,
-    m2: Vec<f64>,
-    /// Diagonal, then D.
-    d0: Vec<f64>,
-    /// M[i + 1][i], then L[i + 1][i].
-    d1: Vec<f64>,
-    /// M[i + 2][i], then L[i + 2][i].
-    d2: Vec<f64>,
+/// The banded normal matrix Gᵀ·W·G, factored in place as L·D·Lᵀ (L unit
+/// lower triangular with [`WIDTH`] − 1 subdiagonals).
+struct Banded {
+    /// The matrix as assembled: `m[0]` the diagonal, `m[q][i]` = M[i + q][i],
+    /// kept for iterative refinement.
+    m: [Vec<f64>; WIDTH],
+    /// The same, then D (`d[0]`) and L (`d[q][i]` = L[i + q][i]).
+    d: [Vec<f64>; WIDTH],
 }
 
-impl Pentadiagonal {
-    fn zeros(n: usize) -> Pentadiagonal {
-        Pentadiagonal {
-            m0: vec![0.0; n],
-            m1: vec![0.0; n],
-            m2: vec![0.0; n],
-            d0: vec![0.0; n],
-            d1: vec![0.0; n],
-            d2: vec![0.0; n],
+impl Banded {
+    fn zeros(n: usize) -> Banded {
+        Banded {
+            m: std::array::from_fn(|_| vec![0.0; n]),
+            d: std::array::from_fn(|_| vec![0.0; n]),
         }
     }
 
     fn clear(&mut self) {
-        self.d0.fill(0.0);
-        self.d1.fill(0.0);
-        self.d2.fill(0.0);
+        for d in &mut self.d {
+            d.fill(0.0);
+        }
     }
 
-    /// Add w·aᵀa for a row a in columns first..first + 3 (all in range).
-    fn add_row(&mut self, first: usize, a: &[f64; 3], w: f64) {
-        let (wa0, wa1, wa2) = (w * a[0], w * a[1], w * a[2]);
-        self.d0[first] += wa0 * a[0];
-        self.d0[first + 1] += wa1 * a[1];
-        self.d0[first + 2] += wa2 * a[2];
-        self.d1[first] += wa0 * a[1];
-        self.d1[first + 1] += wa1 * a[2];
-        self.d2[first] += wa0 * a[2];
+    /// Add w·aᵀa for a row a in columns first..first + [`WIDTH`] (all in
+    /// range).
+    fn add_row(&mut self, first: usize, a: &[f64; WIDTH], w: f64) {
+        for i in 0..WIDTH {
+            let wa = w * a[i];
+            for q in 0..WIDTH - i {
+                self.d[q][first + i] += wa * a[i + q];
+            }
+        }
     }
 
     /// Factor in place. A pivot that cancellation has left below
@@ -287,30 +280,32 @@ impl Pentadiagonal {
     /// a global threshold froze columns that still had a residual to
     /// remove (stellabee1.ngc's first 500 lines then failed a stretch).
     fn factor(&mut self) {
-        let n = self.d0.len();
-        self.m0.copy_from_slice(&self.d0);
-        self.m1.copy_from_slice(&self.d1);
-        self.m2.copy_from_slice(&self.d2);
+        let n = self.d[0].len();
+        for (m, d) in self.m.iter_mut().zip(&self.d) {
+            m.copy_from_slice(d);
+        }
+        let d = &mut self.d;
         for i in 0..n {
-            let mut d = self.d0[i];
-            if i >= 1 {
-                d -= self.d1[i - 1] * self.d1[i - 1] * self.d0[i - 1];
-            }
-            if i >= 2 {
-                d -= self.d2[i - 2] * self.d2[i - 2] * self.d0[i - 2];
+            // Column i: D_i, then L[i + r][i] for r = 1, 2, ….
+            let mut pivot = d[0][i];
+            for q in 1..WIDTH.min(i + 1) {
+                let l = d[q][i - q];
+                pivot -= l * l * d[0][i - q];
             }
             // NaN fails both tests and is caught with the rest.
-            let sound = d > PIVOT * self.m0[i] && d > f64::MIN_POSITIVE;
+            let sound = pivot > PIVOT * self.m[0][i] && pivot > f64::MIN_POSITIVE;
             if !sound {
-                d = 1e128;
+                pivot = 1e128;
             }
-            self.d0[i] = d;
-            let mut l1 = self.d1[i];
-            if i >= 1 {
-                l1 -= self.d2[i - 1] * self.d1[i - 1] * self.d0[i - 1];
+            d[0][i] = pivot;
+            for r in 1..WIDTH {
+                // L[i + r][i]·D_i = M[i + r][i] − Σ_q L[i + r][i − q]·L[i][i − q]·D_{i−q}.
+                let mut l = d[r][i];
+                for q in 1..(WIDTH - r).min(i + 1) {
+                    l -= d[r + q][i - q] * d[q][i - q] * d[0][i - q];
+                }
+                d[r][i] = l / pivot;
             }
-            self.d1[i] = l1 / d;
-            self.d2[i] /= d;
         }
     }
 
@@ -328,18 +323,14 @@ impl Pentadiagonal {
         for _ in 0..REFINE {
             // r = rhs − M·x, then x += M⁻¹·r.
             for i in 0..n {
-                let mut mx = self.m0[i] * b[i];
-                if i + 1 < n {
-                    mx += self.m1[i] * b[i + 1];
-                }
-                if i + 2 < n {
-                    mx += self.m2[i] * b[i + 2];
-                }
-                if i >= 1 {
-                    mx += self.m1[i - 1] * b[i - 1];
-                }
-                if i >= 2 {
-                    mx += self.m2[i - 2] * b[i - 2];
+                let mut mx = self.m[0][i] * b[i];
+                for q in 1..WIDTH {
+                    if i + q < n {
+                        mx += self.m[q][i] * b[i + q];
+                    }
+                    if i >= q {
+                        mx += self.m[q][i - q] * b[i - q];
+                    }
                 }
                 r[i] = rhs[i] - mx;
             }
@@ -353,23 +344,20 @@ impl Pentadiagonal {
     /// Solve L·D·Lᵀ·x = b in place.
     fn solve(&self, b: &mut [f64]) {
         let n = b.len();
+        let d = &self.d;
         for i in 0..n {
-            if i >= 1 {
-                b[i] -= self.d1[i - 1] * b[i - 1];
-            }
-            if i >= 2 {
-                b[i] -= self.d2[i - 2] * b[i - 2];
+            for q in 1..WIDTH.min(i + 1) {
+                b[i] -= d[q][i - q] * b[i - q];
             }
         }
         for i in 0..n {
-            b[i] /= self.d0[i];
+            b[i] /= d[0][i];
         }
         for i in (0..n).rev() {
-            if i + 1 < n {
-                b[i] -= self.d1[i] * b[i + 1];
-            }
-            if i + 2 < n {
-                b[i] -= self.d2[i] * b[i + 2];
+            for q in 1..WIDTH {
+                if i + q < n {
+                    b[i] -= d[q][i] * b[i + q];
+                }
             }
         }
     }
@@ -391,7 +379,7 @@ impl Scaled<'_> {
     fn times(&self, x: &[f64], out: &mut [f64]) {
         for (r, out) in out.iter_mut().enumerate() {
             let (f, a) = (self.first[r], &self.g[r]);
-            *out = a[0] * x[f] + a[1] * x[f + 1] + a[2] * x[f + 2];
+            *out = a.iter().zip(&x[f..f + WIDTH]).map(|(a, x)| a * x).sum();
         }
     }
 
@@ -399,9 +387,9 @@ impl Scaled<'_> {
     fn add_transposed(&self, v: &[f64], out: &mut [f64]) {
         for (r, v) in v.iter().enumerate() {
             let (f, a) = (self.first[r], &self.g[r]);
-            out[f] += a[0] * v;
-            out[f + 1] += a[1] * v;
-            out[f + 2] += a[2] * v;
+            for (out, a) in out[f..f + WIDTH].iter_mut().zip(a) {
+                *out += a * v;
+            }
         }
     }
 
@@ -429,7 +417,7 @@ impl Scaled<'_> {
         let mut ds = vec![0.0; m];
         let mut dz = vec![0.0; m];
         let mut gdx = vec![0.0; m];
-        let mut normal = Pentadiagonal::zeros(n);
+        let mut normal = Banded::zeros(n);
         let mut refine = Vec::with_capacity(n);
         // The iterate with the smallest dual residual and gap among those
         // primal feasible to the tolerance, and its step.
@@ -477,7 +465,7 @@ impl Scaled<'_> {
             }
             for (i, held) in self.held.iter().enumerate() {
                 if *held {
-                    normal.d0[i] = 1.0;
+                    normal.d[0][i] = 1.0;
                 }
             }
             normal.factor();
@@ -563,10 +551,13 @@ mod tests {
     }
 
     #[test]
-    fn rows_wider_than_three_columns_are_refused() {
-        let mut lp = BandedLp::new(5);
-        assert_eq!(lp.push(&[(0, 1.0), (3, 1.0)], 1.0), Err(Failure::NotBanded));
-        assert_eq!(lp.push(&[(5, 1.0)], 1.0), Err(Failure::NotBanded));
+    fn rows_wider_than_the_band_are_refused() {
+        let mut lp = BandedLp::new(6);
+        assert_eq!(
+            lp.push(&[(0, 1.0), (WIDTH, 1.0)], 1.0),
+            Err(Failure::NotBanded)
+        );
+        assert_eq!(lp.push(&[(6, 1.0)], 1.0), Err(Failure::NotBanded));
         assert_eq!(lp.rows(), 0);
     }
 
@@ -595,11 +586,11 @@ mod tests {
     }
 
     /// A row as the tests keep it: first column, coefficients, bound.
-    type Row = (usize, [f64; 3], f64);
+    type Row = (usize, [f64; WIDTH], f64);
 
     /// A random program shaped like the schedule's: 0 ≤ x ≤ cap at every
-    /// column, and pairs |a·x| ≤ b over three neighbouring columns; its
-    /// objective and rows.
+    /// column, and pairs |a·x| ≤ b over three and four neighbouring
+    /// columns; its objective and rows.
     fn random_program(seed: u64, n: usize) -> (BandedLp, Vec<f64>, Vec<Row>) {
         let mut seed = seed;
         let mut rand = move || {
@@ -614,8 +605,8 @@ mod tests {
             let cap = 0.5 + 100.0 * rand();
             lp.push(&[(k, 1.0)], cap).unwrap();
             lp.push(&[(k, -1.0)], 0.0).unwrap();
-            rows.push((k, [1.0, 0.0, 0.0], cap));
-            rows.push((k, [-1.0, 0.0, 0.0], 0.0));
+            rows.push((k, [1.0, 0.0, 0.0, 0.0], cap));
+            rows.push((k, [-1.0, 0.0, 0.0, 0.0], 0.0));
         }
         for k in 1..n - 1 {
             for _ in 0..4 {
@@ -624,8 +615,20 @@ mod tests {
                 for sign in [1.0, -1.0] {
                     let terms = [(k - 1, sign * a[0]), (k, sign * a[1]), (k + 1, sign * a[2])];
                     lp.push(&terms, b).unwrap();
-                    rows.push((k - 1, a.map(|v| v * sign), b));
+                    let a = a.map(|v| v * sign);
+                    rows.push((k - 1, [a[0], a[1], a[2], 0.0], b));
                 }
+            }
+        }
+        // And rows over four columns, as the jerk between nodes makes.
+        for k in 1..n - 2 {
+            let a: [f64; 4] = std::array::from_fn(|_| 10.0 * (rand() - 0.5));
+            let b = 5.0 + 50.0 * rand();
+            for sign in [1.0, -1.0] {
+                let a = a.map(|v| v * sign);
+                let terms: [(usize, f64); 4] = std::array::from_fn(|i| (k - 1 + i, a[i]));
+                lp.push(&terms, b).unwrap();
+                rows.push((k - 1, a, b));
             }
         }
         let c: Vec<f64> = (0..n).map(|_| -0.1 - rand()).collect();
@@ -644,7 +647,10 @@ mod tests {
             let x = lp.solve(&c, 100.0).expect("a bounded, feasible program");
             // Within every row.
             for (f, a, b) in &rows {
-                let ax: f64 = (0..3).filter(|&i| f + i < n).map(|i| a[i] * x[f + i]).sum();
+                let ax: f64 = (0..WIDTH)
+                    .filter(|&i| f + i < n)
+                    .map(|i| a[i] * x[f + i])
+                    .sum();
                 assert!(
                     ax <= b + 1e-7 * (1.0 + b.abs()),
                     "seed {seed}: row at {f}: {ax} > {b}"
@@ -654,7 +660,7 @@ mod tests {
             // The same program in clarabel's terms: A·x + s = b, s ≥ 0.
             let mut entries: Vec<(usize, usize, f64)> = Vec::new();
             for (r, (f, a, _)) in rows.iter().enumerate() {
-                for i in 0..3 {
+                for i in 0..WIDTH {
                     if f + i < n && a[i] != 0.0 {
                         entries.push((f + i, r, a[i]));
                     }
@@ -691,7 +697,7 @@ mod tests {
     }
 
     #[test]
-    fn the_pentadiagonal_factorisation_solves_its_matrix() {
+    fn the_banded_factorisation_solves_its_matrix() {
         // M = Gᵀ·W·G for a random banded G, and M·x = b checked directly.
         let mut seed = 12345u64;
         let mut rand = move || {
@@ -701,21 +707,21 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let n = 40;
-        let rows: Vec<(usize, [f64; 3], f64)> = (0..160)
+        let rows: Vec<(usize, [f64; WIDTH], f64)> = (0..160)
             .map(|r| {
                 (
-                    (r % (n - 2)),
-                    [rand() - 0.5, rand() - 0.5, rand() - 0.5],
+                    (r % (n + 1 - WIDTH)),
+                    std::array::from_fn(|_| rand() - 0.5),
                     0.1 + rand(),
                 )
             })
             .collect();
-        let mut m = Pentadiagonal::zeros(n);
+        let mut m = Banded::zeros(n);
         let mut dense = vec![vec![0.0; n]; n];
         for (f, a, w) in &rows {
             m.add_row(*f, a, *w);
-            for i in 0..3 {
-                for j in 0..3 {
+            for i in 0..WIDTH {
+                for j in 0..WIDTH {
                     dense[f + i][f + j] += w * a[i] * a[j];
                 }
             }
