@@ -868,7 +868,7 @@ impl Sampler {
 /// coefficients of x at nodes j − 1, j, j + 1: the end slope of a ramp to
 /// or from rest beside it, else the slopes of the intervals either side
 /// interpolated from their midpoints to the node. `rest(i)`: node i is a
-/// stop. (`LengthProfile::new` computes the same from values.)
+/// stop. (`LengthProfile::new` applies it to the schedule's values.)
 fn node_slope(nodes: &[Node], j: usize, rest: impl Fn(usize) -> bool) -> [f64; 3] {
     let m = nodes.len();
     let before = j >= 1 && nodes[j - 1].h > 0.0;
@@ -1145,7 +1145,6 @@ impl<'a> LengthProfile<'a> {
     fn new(nodes: &'a [Node], x: &[f64]) -> LengthProfile<'a> {
         let n = nodes.len();
         let h = |k: usize| nodes[k].h;
-        let interval = |k: usize| k + 1 < n && h(k) > 0.0;
         let slope = |k: usize| (x[k + 1] - x[k]) / (2.0 * h(k));
         // u at each node where the motion is under way: continuous with a
         // ramp to or from rest beside it (the ramp's own end slope), else
@@ -1155,21 +1154,12 @@ impl<'a> LengthProfile<'a> {
                 if x[k] == 0.0 {
                     return 0.0;
                 }
-                let before = (k > 0 && interval(k - 1)).then(|| k - 1);
-                let after = interval(k).then_some(k);
-                let out_of_rest = before.filter(|&b| x[b] == 0.0);
-                let into_rest = after.filter(|&a| x[a + 1] == 0.0);
-                match (out_of_rest, into_rest, before, after) {
-                    (Some(b), Some(a), _, _) => (x[k] / h(b) - x[k] / h(a)) / 3.0,
-                    (Some(b), None, _, _) => 2.0 * x[k] / (3.0 * h(b)),
-                    (None, Some(a), _, _) => -2.0 * x[k] / (3.0 * h(a)),
-                    (None, None, Some(b), Some(a)) => {
-                        (slope(b) * h(a) + slope(a) * h(b)) / (h(a) + h(b))
-                    }
-                    (None, None, Some(b), None) => slope(b),
-                    (None, None, None, Some(a)) => slope(a),
-                    (None, None, None, None) => 0.0,
-                }
+                // The rule the linear programs judge, applied to values.
+                let form = node_slope(nodes, k, |i| x[i] == 0.0);
+                (0..3)
+                    .filter(|&o| form[o] != 0.0)
+                    .map(|o| form[o] * x[k + o - 1])
+                    .sum()
             })
             .collect();
         let flattened = std::cell::Cell::new(0);
