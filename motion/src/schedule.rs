@@ -25,8 +25,8 @@
 //! interval's ends and middle, which holds the speed between nodes to the
 //! limits too: judged at the nodes alone, by finite differences, the
 //! solutions zig-zagged from node to node and no motion through them kept
-//! the jerk limit (up to 3.7 times it at 1 ms samples). The jerk limit reads |p′_i·u′ + 3·p″_i·u +
-//! p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
+//! the jerk limit (up to 3.7 times it at 1 ms samples). The jerk limit
+//! reads |p′_i·u′ + 3·p″_i·u + p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
 //! it, and with the tangent in its place the constraint is linear and
 //! stricter than the true one. Every solution of the linear program is
 //! therefore within the jerk limits (at those points), whatever x̄ was;
@@ -61,12 +61,12 @@
 //! the optimum itself.
 //!
 //! Cost: each linear program is solved by an interior-point method whose
-//! Newton systems are banded (`banded`), in time linear in the
-//! nodes: 4,400–15,000 nodes a second at six passes on this project's
-//! 2-core VM (`cargo bench --bench schedule`; fewest on one long
-//! stretch, as the circle's), about three times as fast as stellabee1.ngc
-//! runs on mill3. With `clarabel`, a general sparse solver, until
-//! 2026-11-27 it was 380–2100, as slow as the motion itself.
+//! Newton systems are banded (`banded`), in time linear in the nodes:
+//! 2,200–6,700 nodes a second at six passes on this project's 2-core VM
+//! (`cargo bench --bench schedule`; fewest on one long stretch, as the
+//! circle's), about three times as fast as stellabee1.ngc runs on mill3. (Rows
+//! at the nodes alone gave 4,400–15,000; with `clarabel`, a general sparse
+//! solver, until 2026-11-27 it was 380–2100, as slow as the motion.)
 //!
 //! Axes only: joints of non-trivial kinematics are not modelled, and
 //! [`schedule`] refuses machines that have them.
@@ -743,9 +743,11 @@ impl Sampler {
                 rows.push(&[(k, 1.0)], c_end * from_end.powf(4.0 / 3.0));
             }
         }
-        // Acceleration over each interval, judged at both its ends:
-        // t·(x_{k+1} − x_k)/(2h) + c·x_end.
-        for k in 0..m - 1 {
+        // Acceleration over the ramps out of rest and into it, judged at
+        // both their ends: t·(x_{k+1} − x_k)/(2h) + c·x_end. (Every other
+        // interval's is judged below, where the motion between nodes has
+        // it.)
+        for k in [0, m.saturating_sub(2)] {
             let h = nodes[k].h;
             if h == 0.0 {
                 continue;
@@ -785,12 +787,7 @@ impl Sampler {
         for k in 1..m.saturating_sub(2) {
             let points = JerkPoints::new(nodes, k, |i| (i == 0 && rest_start) || i + 1 == m);
             let base = k - 1;
-            let value = |form: &[f64; 4]| -> f64 {
-                (0..4)
-                    .filter(|&o| form[o] != 0.0)
-                    .map(|o| form[o] * guess[base + o])
-                    .sum()
-            };
+            let value = |form: &[f64; 4]| apply(form, guess, base);
             // Away from the stops the motion keeps a little speed, at the
             // nodes and between them: where x all but vanishes its jerk
             // rows (√x times the rest) say nothing, and the solutions
@@ -895,6 +892,17 @@ fn node_slope(nodes: &[Node], j: usize, rest: impl Fn(usize) -> bool) -> [f64; 3
         (false, false, false, true) => [0.0, -0.5 / h1, 0.5 / h1],
         (false, false, false, false) => [0.0; 3],
     }
+}
+
+/// Σ form[o]·x[first + o]: a linear form over neighbouring nodes applied
+/// to values (terms with a zero coefficient skipped, so a form may reach
+/// past either end of `x` where it has none).
+fn apply(form: &[f64], x: &[f64], first: usize) -> f64 {
+    form.iter()
+        .enumerate()
+        .filter(|&(_, &c)| c != 0.0)
+        .map(|(o, c)| c * x[first + o])
+        .sum()
 }
 
 /// A point of an interval where the jerk and acceleration of
@@ -1096,14 +1104,14 @@ pub enum Interpolant {
     /// schedule's centred u, zero at rest), lasting as [`interval_time`]
     /// counts it: the motion passes every node at its time and speed.
     QuinticInTime,
-    /// The speed as a function of arc length, as the nodes' rows take it:
-    /// x = v² piecewise quadratic in s, its half-slope u = ½·dx/ds (the
-    /// path acceleration) continuous and linear on each half interval,
-    /// so that u′, which with u and x makes the jerk, is constant over
-    /// each node's stretch of path as its jerk row has it; out of rest and
-    /// into it the constant-jerk ramp x ∝ d^{4/3} that the nodes next to
-    /// a stop are capped by. Each interval's x meets both nodes' x, so the
-    /// time between them is the interval's own.
+    /// The speed as a function of arc length, the motion the schedule's
+    /// rows judge: x = v² piecewise quadratic in s, its half-slope u =
+    /// ½·dx/ds (the path acceleration) continuous and linear on each half
+    /// interval, so that u′, which with u and x makes the jerk, is
+    /// constant on each half; each node's u from the slopes of the
+    /// intervals beside it; out of rest and into it the constant-jerk ramp
+    /// x ∝ d^{4/3} that the nodes next to a stop are capped by. Each
+    /// interval's x meets both nodes' x.
     SpeedInLength,
 }
 
@@ -1123,11 +1131,101 @@ enum Piece {
     Out { x1: f64 },
     /// Into rest: x = x0·((h − d)/h)^{4/3}.
     In { x0: f64 },
-    /// u linear from `u0` at the start to `um` at the middle and on to
-    /// `u1` at the end; x starts at `x0`.
-    Smooth { x0: f64, u0: f64, um: f64, u1: f64 },
+    /// Both ends in motion.
+    Smooth(Halves),
     /// Both ends at rest: the stretch stands still.
     Still,
+}
+
+/// x over an interval of length `h` whose ends are both in motion: u
+/// linear from `u0` at the start to `um` at the middle and on to `u1` at
+/// the end, so x is a quadratic on each half, starting at `x0`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Halves {
+    h: f64,
+    x0: f64,
+    u0: f64,
+    um: f64,
+    u1: f64,
+}
+
+impl Halves {
+    /// x at `d` into the interval.
+    fn x(&self, d: f64) -> f64 {
+        let Halves { h, x0, u0, um, u1 } = *self;
+        let half = 0.5 * h;
+        if d <= half {
+            x0 + 2.0 * (u0 * d + (um - u0) * d * d / h)
+        } else {
+            let e = d - half;
+            let xm = x0 + half * (u0 + um);
+            xm + 2.0 * (um * e + (u1 - um) * e * e / h)
+        }
+    }
+
+    /// The least x over the interval: at an end, the middle, or where u
+    /// crosses zero on a half.
+    fn lowest(&self) -> f64 {
+        let Halves { h, u0, um, u1, .. } = *self;
+        let half = 0.5 * h;
+        let mut least = self.x(0.0).min(self.x(half)).min(self.x(h));
+        if (u0 > 0.0) != (um > 0.0) {
+            least = least.min(self.x(half * u0 / (u0 - um)));
+        }
+        if (um > 0.0) != (u1 > 0.0) {
+            least = least.min(self.x(half + half * um / (um - u1)));
+        }
+        least
+    }
+
+    /// Time from the start to `d` into the interval: ∫ ds/√x, by
+    /// Gauss–Legendre on each half (x is a quadratic on each).
+    fn time(&self, d: f64) -> f64 {
+        let rule = |a: f64, b: f64| {
+            let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
+            let inv = |s: f64| 1.0 / self.x(s).max(f64::MIN_POSITIVE).sqrt();
+            GAUSS8
+                .iter()
+                .map(|&(z, w)| w * (inv(mid - half * z) + inv(mid + half * z)))
+                .sum::<f64>()
+                * half
+        };
+        let half = 0.5 * self.h;
+        if d <= half {
+            rule(0.0, d)
+        } else {
+            rule(0.0, half) + rule(half, d)
+        }
+    }
+
+    /// Where the interval is `t` into it, searched from `near` (an
+    /// earlier position in it, or 0): Newton on time(d) = t, kept inside
+    /// a bracket that bisection falls back on (time rises with d).
+    fn position(&self, t: f64, near: f64) -> f64 {
+        let h = self.h;
+        let (mut low, mut high) = (near.clamp(0.0, h), h);
+        if self.time(low) > t {
+            low = 0.0;
+        }
+        let mut d = low;
+        for _ in 0..60 {
+            let miss = self.time(d) - t;
+            if miss > 0.0 {
+                high = d;
+            } else {
+                low = d;
+            }
+            let mut next = d - miss * self.x(d).max(0.0).sqrt();
+            if !(next > low && next < high) {
+                next = 0.5 * (low + high);
+            }
+            if (next - d).abs() <= 1e-15 * h.max(d) || high - low <= 1e-15 * h {
+                return next;
+            }
+            d = next;
+        }
+        d
+    }
 }
 
 /// The schedule's speed as a function of arc length, interval by
@@ -1144,116 +1242,59 @@ struct LengthProfile<'a> {
 impl<'a> LengthProfile<'a> {
     fn new(nodes: &'a [Node], x: &[f64]) -> LengthProfile<'a> {
         let n = nodes.len();
-        let h = |k: usize| nodes[k].h;
-        let slope = |k: usize| (x[k + 1] - x[k]) / (2.0 * h(k));
-        // u at each node where the motion is under way: continuous with a
-        // ramp to or from rest beside it (the ramp's own end slope), else
-        // the midpoints' slopes interpolated to the node.
+        // u at each node in motion, by the rule the linear programs judge
+        // (node 0 has no node before it; its form has no term there).
         let u: Vec<f64> = (0..n)
             .map(|k| {
                 if x[k] == 0.0 {
                     return 0.0;
                 }
-                // The rule the linear programs judge, applied to values.
                 let form = node_slope(nodes, k, |i| x[i] == 0.0);
-                (0..3)
-                    .filter(|&o| form[o] != 0.0)
-                    .map(|o| form[o] * x[k + o - 1])
-                    .sum()
+                match k {
+                    0 => apply(&form[1..], x, 0),
+                    _ => apply(&form, x, k - 1),
+                }
             })
             .collect();
-        let flattened = std::cell::Cell::new(0);
-        let pieces = (0..n.saturating_sub(1))
-            .map(|k| match (x[k] > 0.0, x[k + 1] > 0.0) {
-                _ if h(k) == 0.0 => Piece::Still,
+        let mut flattened = 0;
+        let mut pieces = Vec::with_capacity(n.saturating_sub(1));
+        for k in 0..n.saturating_sub(1) {
+            let h = nodes[k].h;
+            pieces.push(match (x[k] > 0.0, x[k + 1] > 0.0) {
+                _ if h == 0.0 => Piece::Still,
                 (false, false) => Piece::Still,
                 (false, true) => Piece::Out { x1: x[k + 1] },
                 (true, false) => Piece::In { x0: x[k] },
                 (true, true) => {
                     let (u0, u1) = (u[k], u[k + 1]);
+                    let slope = (x[k + 1] - x[k]) / (2.0 * h);
                     // The middle chosen so that x meets the next node's.
-                    let um = 2.0 * slope(k) - 0.5 * (u0 + u1);
-                    let c = [x[k], u0, um, u1];
-                    // x is a quadratic on each half: its least value is
-                    // at an end or where u = 0 on a half.
-                    let lowest = Self::lowest(h(k), c);
-                    if lowest < 0.5 * x[k].min(x[k + 1]) {
-                        flattened.set(flattened.get() + 1);
-                        let m = slope(k);
-                        Piece::Smooth {
-                            x0: x[k],
-                            u0: m,
-                            um: m,
-                            u1: m,
-                        }
+                    let um = 2.0 * slope - 0.5 * (u0 + u1);
+                    let halves = Halves {
+                        h,
+                        x0: x[k],
+                        u0,
+                        um,
+                        u1,
+                    };
+                    if halves.lowest() < 0.5 * x[k].min(x[k + 1]) {
+                        flattened += 1;
+                        Piece::Smooth(Halves {
+                            u0: slope,
+                            um: slope,
+                            u1: slope,
+                            ..halves
+                        })
                     } else {
-                        Piece::Smooth {
-                            x0: x[k],
-                            u0,
-                            um,
-                            u1,
-                        }
+                        Piece::Smooth(halves)
                     }
                 }
-            })
-            .collect();
+            });
+        }
         LengthProfile {
             nodes,
             pieces,
-            flattened: flattened.get(),
-        }
-    }
-
-    /// The least x over a smooth interval.
-    fn lowest(h: f64, [x0, u0, um, u1]: [f64; 4]) -> f64 {
-        let c = [x0, u0, um, u1];
-        let half = 0.5 * h;
-        let mut least = Self::x_smooth(h, c, 0.0)
-            .min(Self::x_smooth(h, c, half))
-            .min(Self::x_smooth(h, c, h));
-        // u = u0 + (um − u0)·d/half on the first half, zero at:
-        if (u0 > 0.0) != (um > 0.0) {
-            let d = half * u0 / (u0 - um);
-            least = least.min(Self::x_smooth(h, c, d));
-        }
-        if (um > 0.0) != (u1 > 0.0) {
-            let d = half + half * um / (um - u1);
-            least = least.min(Self::x_smooth(h, c, d));
-        }
-        least
-    }
-
-    /// x at `d` into the smooth interval of length `h`.
-    fn x_smooth(h: f64, [x0, u0, um, u1]: [f64; 4], d: f64) -> f64 {
-        let half = 0.5 * h;
-        if d <= half {
-            x0 + 2.0 * (u0 * d + (um - u0) * d * d / h)
-        } else {
-            let e = d - half;
-            let xm = x0 + half * (u0 + um);
-            xm + 2.0 * (um * e + (u1 - um) * e * e / h)
-        }
-    }
-
-    /// Time from the start of a smooth interval to `d` into it: ∫ ds/√x,
-    /// by Gauss–Legendre on each half (x is a quadratic on each).
-    fn t_smooth(h: f64, c: [f64; 4], d: f64) -> f64 {
-        let rule = |a: f64, b: f64| {
-            let (mid, half) = (0.5 * (a + b), 0.5 * (b - a));
-            GAUSS8
-                .iter()
-                .map(|&(z, w)| {
-                    let inv = |s: f64| 1.0 / Self::x_smooth(h, c, s).max(f64::MIN_POSITIVE).sqrt();
-                    w * (inv(mid - half * z) + inv(mid + half * z))
-                })
-                .sum::<f64>()
-                * half
-        };
-        let half = 0.5 * h;
-        if d <= half {
-            rule(0.0, d)
-        } else {
-            rule(0.0, half) + rule(half, d)
+            flattened,
         }
     }
 
@@ -1263,7 +1304,7 @@ impl<'a> LengthProfile<'a> {
         match self.pieces[k] {
             Piece::Out { x1 } => 3.0 * h / x1.sqrt(),
             Piece::In { x0 } => 3.0 * h / x0.sqrt(),
-            Piece::Smooth { x0, u0, um, u1 } => Self::t_smooth(h, [x0, u0, um, u1], h),
+            Piece::Smooth(halves) => halves.time(h),
             Piece::Still => f64::INFINITY,
         }
     }
@@ -1279,34 +1320,7 @@ impl<'a> LengthProfile<'a> {
                 let left = (3.0 * h / x0.sqrt() - t).max(0.0);
                 h - (h * (left * x0.sqrt() / (3.0 * h)).powi(3)).min(h)
             }
-            Piece::Smooth { x0, u0, um, u1 } => {
-                let c = [x0, u0, um, u1];
-                // Newton on t(d) = t, kept inside a bracket that bisection
-                // falls back on (t(d) rises with d).
-                let (mut low, mut high) = (near.clamp(0.0, h), h);
-                if Self::t_smooth(h, c, low) > t {
-                    low = 0.0;
-                }
-                let mut d = low;
-                for _ in 0..60 {
-                    let miss = Self::t_smooth(h, c, d) - t;
-                    if miss > 0.0 {
-                        high = d;
-                    } else {
-                        low = d;
-                    }
-                    let step = miss * Self::x_smooth(h, c, d).max(0.0).sqrt();
-                    let mut next = d - step;
-                    if !(next > low && next < high) {
-                        next = 0.5 * (low + high);
-                    }
-                    if (next - d).abs() <= 1e-15 * h.max(d) || high - low <= 1e-15 * h {
-                        return next;
-                    }
-                    d = next;
-                }
-                d
-            }
+            Piece::Smooth(halves) => halves.position(t, near),
             Piece::Still => 0.0,
         }
     }
@@ -1445,12 +1459,13 @@ impl Schedule {
         Ok(out)
     }
 
-    /// Largest axis velocity, acceleration and jerk use at the nodes and,
-    /// for acceleration and jerk, at the ends and middle of every interval
-    /// as [`Interpolant::SpeedInLength`] moves through it, with the exact
-    /// speed √x where the linear programs used its tangent. The jerk is
-    /// not judged on the intervals out of a stop and into one, where the
-    /// motion is the constant-jerk ramp the rest cap bounds.
+    /// Largest axis velocity, acceleration and jerk use: velocity at the
+    /// nodes; acceleration and jerk at the ends and middle of every
+    /// interval in motion at both ends, as [`Interpolant::SpeedInLength`]
+    /// moves through it, with the exact speed √x where the linear programs
+    /// used its tangent. On the intervals out of a stop and into one, the
+    /// constant-jerk ramp the rest cap bounds, the acceleration at both
+    /// ends by the interval's slope, as the programs judge it.
     pub fn limit_use(&self, kins: &dyn Kinematics) -> Result<ScheduleUse, ScheduleError> {
         let limits = axis_limits(kins)?;
         let nodes = &self.nodes;
@@ -1466,25 +1481,22 @@ impl Schedule {
             if k + 1 == nodes.len() || nodes[k].h == 0.0 {
                 continue;
             }
-            let u = slope(k);
-            for (end, g) in [(k, &nodes[k].right), (k + 1, &nodes[k + 1].left)] {
-                for i in 0..9 {
-                    let a = g.t[i] * u + g.c[i] * x[end];
-                    use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
-                }
-            }
-            // The jerk and acceleration between the nodes, where the motion
-            // is under way at both (next to a stop the ramp cap holds).
             if k == 0 || x[k] == 0.0 || x[k + 1] == 0.0 {
+                // A ramp out of rest or into it: its acceleration at both
+                // ends by the interval's slope, as the programs judge it.
+                let u = slope(k);
+                for (end, g) in [(k, &nodes[k].right), (k + 1, &nodes[k + 1].left)] {
+                    for i in 0..9 {
+                        let a = g.t[i] * u + g.c[i] * x[end];
+                        use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
+                    }
+                }
                 continue;
             }
+            // The jerk and acceleration between the nodes, where the motion
+            // is under way at both.
             let points = JerkPoints::new(nodes, k, |i| x[i] == 0.0);
-            let value = |form: &[f64; 4]| -> f64 {
-                (0..4)
-                    .filter(|&o| form[o] != 0.0)
-                    .map(|o| form[o] * x[k - 1 + o])
-                    .sum()
-            };
+            let value = |form: &[f64; 4]| apply(form, &x, k - 1);
             for point in points.points() {
                 let g = point.geometry;
                 let (xp, u, slope) = (
@@ -1522,8 +1534,10 @@ mod tests {
     }
 
     /// The speed in arc length between two moving nodes meets both nodes'
-    /// x, keeps u continuous through the middle, takes as long as a fine
-    /// sum of ds/v says, and its clock inverts.
+    /// x, takes each node's u from the slopes of the intervals beside it
+    /// (or from the ramp into a stop), keeps u continuous through the
+    /// middle, takes as long as a fine sum of ds/v says, and its clock
+    /// inverts.
     #[test]
     fn an_interval_followed_by_length_meets_its_nodes_and_its_clock_inverts() {
         let h = 0.01;
@@ -1533,45 +1547,48 @@ mod tests {
             .collect();
         let profile = LengthProfile::new(&nodes, &x);
         assert_eq!(profile.flattened, 0);
-        let Piece::Smooth { x0, u0, um, u1 } = profile.pieces[1] else {
+        let Piece::Smooth(halves) = profile.pieces[1] else {
             panic!(
                 "interval 1 is between moving nodes: {:?}",
                 profile.pieces[1]
             );
         };
-        let c = [x0, u0, um, u1];
-        assert_eq!(x0, x[1]);
-        assert!((LengthProfile::x_smooth(h, c, h) - x[2]).abs() < 1e-12);
+        // Equal intervals: a node's u is the mean of its two intervals'
+        // slopes (x_{k+1} − x_k)/(2h); node 3 ends at the ramp into the
+        // stop after it, x ∝ (h − d)^{4/3}, whose slope there is
+        // −(4/3)·x_3/h, so u = −(2/3)·x_3/h.
+        let mean = |k: usize| 0.25 * (x[k + 1] - x[k - 1]) / h;
+        assert!((halves.u0 - mean(1)).abs() < 1e-9 * mean(1));
+        assert!((halves.u1 - mean(2)).abs() < 1e-9 * mean(2));
+        let Piece::Smooth(last) = profile.pieces[2] else {
+            panic!("interval 2 is between moving nodes");
+        };
+        assert!((last.u1 + 2.0 / 3.0 * x[3] / h).abs() < 1e-9 * x[3] / h);
+        // Both nodes' x met.
+        assert_eq!(halves.x(0.0), x[1]);
+        assert!((halves.x(h) - x[2]).abs() < 1e-12);
         // u (half the slope of x) the same either side of the middle.
         let e = 1e-6 * h;
-        let left = (LengthProfile::x_smooth(h, c, 0.5 * h)
-            - LengthProfile::x_smooth(h, c, 0.5 * h - e))
-            / (2.0 * e);
-        let right = (LengthProfile::x_smooth(h, c, 0.5 * h + e)
-            - LengthProfile::x_smooth(h, c, 0.5 * h))
-            / (2.0 * e);
+        let left = (halves.x(0.5 * h) - halves.x(0.5 * h - e)) / (2.0 * e);
+        let right = (halves.x(0.5 * h + e) - halves.x(0.5 * h)) / (2.0 * e);
+        let um = halves.um;
         assert!(
             (left - um).abs() < 1e-3 * um.abs() && (right - um).abs() < 1e-3 * um.abs(),
             "{left} {right} {um}"
         );
-        // Node 2's u, from its intervals' slopes, starts interval 2.
-        let Piece::Smooth { u0: next, .. } = profile.pieces[2] else {
-            panic!("interval 2 is between moving nodes");
-        };
-        assert_eq!(next, u1);
         // The clock against a fine midpoint sum.
         let n = 100_000;
         let fine: f64 = (0..n)
             .map(|i| {
                 let s = (i as f64 + 0.5) * h / n as f64;
-                h / n as f64 / LengthProfile::x_smooth(h, c, s).sqrt()
+                h / n as f64 / halves.x(s).sqrt()
             })
             .sum();
         let lasts = profile.duration(1);
         assert!((lasts - fine).abs() < 1e-9 * fine, "{lasts} against {fine}");
         for share in [0.1, 0.37, 0.5, 0.8, 0.999] {
             let d = profile.position(1, share * lasts, 0.0);
-            let back = LengthProfile::t_smooth(h, c, d);
+            let back = halves.time(d);
             assert!((back - share * lasts).abs() < 1e-12, "{share}: {back}");
         }
         // Into the stop at the end: the constant-jerk ramp, 3h/v long.
