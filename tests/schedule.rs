@@ -183,17 +183,9 @@ fn s_curve_speed_stopping_in(distance: f64, a: f64, j: f64) -> f64 {
 /// Solved in windows, as a planner running ahead must be, the schedule
 /// can go no faster than it could stop within one window: every window
 /// ends at rest. With windows longer than the stop, a line runs as it
-/// does solved whole; with shorter ones, its top speed is at most the
-/// speed that stops within the whole window, and the seams between
-/// windows keep every limit.
-///
-/// Short windows (2 mm, 0.5 mm kept) no longer reach the speed that stops
-/// within their unkept part: since the rows judge the motion between
-/// nodes, many of their programs find no continuation of the committed
-/// state and the schedule follows the window before to rest (14 times on
-/// this line; `docs/motion-log.md`, session 33). Their figures are printed
-/// and the cap checked; the lower speed is an open defect of the windows,
-/// not asserted.
+/// does solved whole; with shorter ones, its top speed is between the
+/// speeds that stop within the window's unkept part and within the
+/// whole window, and the seams between windows keep every limit.
 #[test]
 fn windows_cap_the_speed_at_what_stops_within_them() {
     let machine = kerf_machines::load("mill3").unwrap();
@@ -209,11 +201,9 @@ fn windows_cap_the_speed_at_what_stops_within_them() {
             ..config()
         };
         let found = schedule(&segments, kins, config).unwrap();
-        eprintln!(
-            "windows of {horizon} keeping {commit}: {} programs given up of {}, {} windows, {} rests",
-            found.failed, found.solves, found.windows, found.window_rests
-        );
+        assert_eq!(found.failed, 0, "every linear program solved");
         assert!(found.windows > 1, "solved in {} windows", found.windows);
+        assert_eq!(found.window_rests, 0, "every window solved");
         let used = found.limit_use(kins).unwrap();
         assert!(
             used.slowdown() <= 1.0 + SOLVER_TOLERANCE,
@@ -225,8 +215,6 @@ fn windows_cap_the_speed_at_what_stops_within_them() {
 
     // 8 mm windows, 2 mm kept of each.
     let long = windowed(400, 100);
-    assert_eq!(long.failed, 0, "every linear program solved");
-    assert_eq!(long.window_rests, 0, "every window solved");
     let top = long.v.iter().copied().fold(0.0, f64::max);
     assert!((top - 100.0).abs() < 1e-3, "top speed {top} mm/s");
     assert!(
@@ -242,10 +230,10 @@ fn windows_cap_the_speed_at_what_stops_within_them() {
     let top = short.v.iter().copied().fold(0.0, f64::max);
     let most = s_curve_speed_stopping_in(horizon as f64 * ds, 1500.0, 75_000.0);
     let least = s_curve_speed_stopping_in((horizon - commit) as f64 * ds, 1500.0, 75_000.0);
-    eprintln!("2 mm windows: top speed {top:.3} mm/s, stops within the unkept part from {least:.3}, within the window from {most:.3}");
+    eprintln!("2 mm windows: top speed {top:.3} mm/s, between {least:.3} and {most:.3}");
     assert!(
-        top <= most * (1.0 + SOLVER_TOLERANCE),
-        "top speed {top:.3} mm/s, stops within the window from {most:.3}"
+        top <= most * (1.0 + SOLVER_TOLERANCE) && top >= 0.95 * least,
+        "top speed {top:.3} mm/s, stops within the window from {most:.3}, within its unkept part from {least:.3}"
     );
     assert!(
         short.time > long.time * 1.2,

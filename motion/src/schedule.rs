@@ -89,6 +89,10 @@ const REST_NODES: usize = 8;
 /// than [`REST_NODES`] from a stop, where the caps allow it.
 const MOVING_X: f64 = 1.0;
 
+/// Share of its bound by which a row across a window's seam may exceed
+/// it (see `Rows::push`): the tolerance on limit use, 1e-6.
+const SEAM_ROOM: f64 = 1e-8;
+
 /// Lower first guesses tried when the solver gives up on the first pass.
 const RETRIES: usize = 3;
 
@@ -1034,10 +1038,10 @@ impl Rows {
             None => self.lp.push(terms, bound),
             Some(fixed) => {
                 let mut free = [(0, 0.0); 4];
-                let (mut n, mut bound) = (0, bound);
+                let (mut n, mut room) = (0, bound);
                 for &(column, value) in terms {
                     if column < 3 {
-                        bound -= value * fixed[column];
+                        room -= value * fixed[column];
                     } else {
                         free[n] = (column, value);
                         n += 1;
@@ -1046,7 +1050,15 @@ impl Rows {
                 if n == 0 {
                     return;
                 }
-                self.lp.push(&free[..n], bound)
+                if n < terms.len() {
+                    // The window before committed these nodes at its own
+                    // limits, so a row across the seam can leave the free
+                    // nodes a single feasible value, and the interior-
+                    // point method no interior to move in. SEAM_ROOM of
+                    // the row's bound gives it one.
+                    room += SEAM_ROOM * bound.abs();
+                }
+                self.lp.push(&free[..n], room)
             }
         };
         // Every row this module builds spans at most four neighbouring
