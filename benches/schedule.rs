@@ -7,7 +7,7 @@
 //! each segment may still have to give away against the bound, and
 //! `executor / schedule` the least such a planner would gain.
 //!
-//! Run: `cargo bench --bench schedule` (about 40 s on this project's
+//! Run: `cargo bench --bench schedule` (about four minutes on this project's
 //! 2-core VM), or with `-- LINES PASSES` for the first LINES lines of
 //! stellabee1.ngc (default 2000; `-- 200000` for the whole file) and
 //! PASSES linear programs per stretch (default 6). `-- LINES PASSES
@@ -64,8 +64,11 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
     };
     let followed = follow(Interpolant::QuinticInTime);
     let by_length = follow(Interpolant::SpeedInLength);
+    let (continuous, _, _) = found
+        .continuous_jerk(&segments, kins, 16)
+        .expect("mill3 has trivial kinematics");
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}  {:>10.3} s {:>5.3} {:>5.3} {:>6.3} {:>6.3} {:>4}",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}  {:>10.3} s {:>5.3} {:>5.3} {:>6.3} {:>6.3} {:>4} {:>6.3}",
         executor / bound,
         time / bound,
         executor / time,
@@ -86,6 +89,7 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         by_length.limits.jerk,
         by_length.jerk_in_motion,
         by_length.flattened,
+        continuous,
     );
 }
 
@@ -128,7 +132,7 @@ fn main() {
     };
     println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}");
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4} {:>6}",
         "program",
         "executor",
         "bound",
@@ -153,7 +157,8 @@ fn main() {
         "a@T",
         "j@T",
         "moving",
-        "flat"
+        "flat",
+        "cont j"
     );
     row(
         "circle R20, 0.05 mm chords",
@@ -190,5 +195,6 @@ fn main() {
     println!("v@T a@T j@T: the same, on the schedule followed in time and sampled every servo period (Schedule::sampled),");
     println!("  first a quintic in time between nodes, then (by length: its motion time) the speed as a function of arc");
     println!("  length that the schedule's rows judge (Interpolant::SpeedInLength); moving: the jerk away from stops;");
-    println!("  flat: intervals followed at constant acceleration where that speed would dip towards rest");
+    println!("  flat: intervals followed at constant acceleration where that speed would dip towards rest;");
+    println!("  cont j: the jerk of that motion itself, between the samples (Schedule::continuous_jerk, 33 points an interval)");
 }

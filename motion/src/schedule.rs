@@ -93,6 +93,77 @@ const MOVING_X: f64 = 1.0;
 /// it (see `Rows::push`): the tolerance on limit use, 1e-6.
 const SEAM_ROOM: f64 = 1e-8;
 
+/// Each half interval's motion is judged at its ends and at this many
+/// minus one evenly spaced points inside: x and u change slowly along an
+/// interval, but the geometry of a dense-curve blend can turn its
+/// curvature within a few micrometres, and the jerk between judged
+/// points then exceeds what the points show (judged at the ends and
+/// middle alone, 1.06 of the limit on 1 ms samples of stellabee1.ngc).
+const JUDGED_PER_HALF: usize = 4;
+
+/// How far the geometry between judged points may stray from the straight
+/// line between them, as a share of each quantity's largest size over the
+/// interval, for those points to be judged alone ([`stride`]). The jerk
+/// is a sum of terms that partly cancel, so the share must be small: at
+/// 0.02, stellabee1.ngc's first 2000 lines read 1.004 of the jerk limit
+/// on their 1 ms samples; at 0.005 and below, within it, and at 0.0025
+/// the motion between samples reads what every interval judged at every
+/// point does (1.004, `Schedule::continuous_jerk`).
+const GEOMETRY_STRAY: f64 = 0.0025;
+
+/// Of an interval's possible judged points (geometry `start`, `inner`,
+/// `end`), every how many to judge: the coarsest stride (a power of two
+/// up to [`JUDGED_PER_HALF`]) at which every point left out has its
+/// tangent, curvature and third derivative within [`GEOMETRY_STRAY`] of
+/// the straight line between the judged points beside it. Lines and arcs
+/// take the coarsest; blends whose curvature turns inside an interval,
+/// finer ones.
+fn stride(start: &Geometry, inner: &[Geometry; INNER], end: &Geometry) -> usize {
+    let at = |j: usize| match j {
+        0 => start,
+        _ if j == INNER + 1 => end,
+        _ => &inner[j - 1],
+    };
+    let parts = |g: &Geometry| [g.t, g.c, g.d];
+    // Each quantity's largest size per axis over the interval.
+    let mut size = [[0.0f64; 9]; 3];
+    for j in 0..=INNER + 1 {
+        for (q, part) in parts(at(j)).iter().enumerate() {
+            for i in 0..9 {
+                size[q][i] = size[q][i].max(part[i].abs());
+            }
+        }
+    }
+    let mut stride = JUDGED_PER_HALF;
+    while stride > 1 {
+        let straight = (0..=INNER + 1)
+            .filter(|j| !j.is_multiple_of(stride))
+            .all(|j| {
+                let a = j / stride * stride;
+                let w = (j - a) as f64 / stride as f64;
+                let (pa, pb, pj) = (parts(at(a)), parts(at(a + stride)), parts(at(j)));
+                (0..3).all(|q| {
+                    (0..9).all(|i| {
+                        let line = (1.0 - w) * pa[q][i] + w * pb[q][i];
+                        (pj[q][i] - line).abs() <= GEOMETRY_STRAY * size[q][i]
+                    })
+                })
+            });
+        if straight {
+            break;
+        }
+        stride /= 2;
+    }
+    stride
+}
+
+/// Points inside an interval where the geometry is kept.
+const INNER: usize = 2 * JUDGED_PER_HALF - 1;
+
+/// Points judged per interval: each half's ends and inside points (the
+/// middle twice, once with each half's u′).
+const JUDGED: usize = 2 * (JUDGED_PER_HALF + 1);
+
 /// Lower first guesses tried when the solver gives up on the first pass.
 const RETRIES: usize = 3;
 
@@ -167,6 +238,27 @@ struct Geometry {
     d: Vec9,
 }
 
+impl Geometry {
+    /// The path's derivatives `s` mm into `segment`.
+    fn at(segment: &Segment, s: f64) -> Geometry {
+        let shape = &segment.shape;
+        let f = shape.frame(s);
+        let d = match shape {
+            Shape::Line(_) => [0.0; 9],
+            Shape::Arc(a) => arc_third(a, s, segment.length),
+            Shape::Blend(b) => {
+                let d3 = b.third_at_parameter(b.parameter(s));
+                std::array::from_fn(|i| if i < 3 { d3[i] } else { 0.0 })
+            }
+        };
+        Geometry {
+            t: f.tangent,
+            c: f.curvature,
+            d,
+        }
+    }
+}
+
 /// A sampled point of the path.
 #[derive(Clone, Debug)]
 struct Node {
@@ -175,9 +267,13 @@ struct Node {
     left: Geometry,
     /// Geometry at the start of the interval after.
     right: Geometry,
-    /// Geometry halfway along the interval after (unused where it has
-    /// no length).
-    mid: Geometry,
+    /// Geometry at the points inside the interval after where the motion
+    /// is judged, j/(2·[`JUDGED_PER_HALF`]) along it for j = 1, 2, …
+    /// (unused where it has no length).
+    inner: [Geometry; INNER],
+    /// Of the points a half interval could be judged at, every `stride`th
+    /// is ([`stride`]).
+    stride: usize,
     /// Largest x = v² here, mm²/s².
     xmax: f64,
     /// Arc length of the interval to the next node, mm (0 after the last
@@ -353,23 +449,7 @@ impl Sampler {
         };
         let n = ((len / ds).ceil() as usize).max(4);
         let at = |k: usize| len * k as f64 / n as f64;
-        let geometry = |s: f64| -> Geometry {
-            let shape = &segment.shape;
-            let f = shape.frame(s);
-            let d = match shape {
-                Shape::Line(_) => [0.0; 9],
-                Shape::Arc(a) => arc_third(a, s, len),
-                Shape::Blend(b) => {
-                    let d3 = b.third_at_parameter(b.parameter(s));
-                    std::array::from_fn(|i| if i < 3 { d3[i] } else { 0.0 })
-                }
-            };
-            Geometry {
-                t: f.tangent,
-                c: f.curvature,
-                d,
-            }
-        };
+        let geometry = |s: f64| Geometry::at(segment, s);
         let first = geometry(0.0);
         let start_cap = self.velocity_cap(&first, feed);
         match self.nodes.last_mut() {
@@ -402,7 +482,8 @@ impl Sampler {
                 self.nodes.push(Node {
                     left: first,
                     right: first,
-                    mid: first,
+                    inner: [first; INNER],
+                    stride: JUDGED_PER_HALF,
                     xmax: 0.0,
                     h: 0.0,
                     smooth: false,
@@ -414,13 +495,18 @@ impl Sampler {
         for k in 1..=n {
             let last = self.nodes.last_mut().expect("a node was pushed above");
             last.h = at(k) - at(k - 1);
-            last.mid = geometry(0.5 * (at(k) + at(k - 1)));
+            let (from, h) = (at(k - 1), at(k) - at(k - 1));
+            last.inner = std::array::from_fn(|j| {
+                geometry(from + (j + 1) as f64 * h / (2 * JUDGED_PER_HALF) as f64)
+            });
             let g = geometry(at(k));
+            last.stride = stride(&last.right, &last.inner, &g);
             let xmax = self.velocity_cap(&g, feed);
             self.nodes.push(Node {
                 left: g,
                 right: g,
-                mid: g,
+                inner: [g; INNER],
+                stride: JUDGED_PER_HALF,
                 xmax,
                 h: 0.0,
                 smooth: true,
@@ -799,7 +885,7 @@ impl Sampler {
             // between two nodes, which the motion between them cannot do.
             if k > REST_NODES && k + 1 + REST_NODES < m {
                 let least = MOVING_X.min(0.5 * nodes[k].xmax.min(nodes[k + 1].xmax));
-                for form in [points.x0, points.xm] {
+                for form in points.start_and_middle() {
                     let terms: [(usize, f64); 4] = std::array::from_fn(|o| (base + o, -form[o]));
                     rows.push(&terms, -least);
                 }
@@ -823,7 +909,13 @@ impl Sampler {
                         rows.push(&terms, j_max[i] * l0);
                     }
                 }
-                // The axes' acceleration t·u + c·x there too.
+                // The axes' acceleration t·u + c·x there too. (The
+                // middle's row comes twice, with each half's point: without
+                // the copy, a window of a plain line in tests/schedule.rs
+                // stalled at 1.6e-6 of the interior-point solver's
+                // optimality, just past its acceptance of 1e-6, and
+                // accepting 1e-5 instead let a junction of stellabee1.ngc
+                // through at 1.003 of its jerk limit.)
                 for i in 0..9 {
                     let g = point.geometry;
                     if g.t[i] == 0.0 && g.c[i] == 0.0 {
@@ -920,20 +1012,20 @@ struct JerkPoint<'n> {
 }
 
 /// The points of interval k (both its nodes in motion) where the motion
-/// between nodes is judged: its start, its middle (once with each half's
-/// u′) and its end. On each half u is linear, so u′ is constant, and x,
-/// u and the geometry vary only slowly between these points.
+/// between nodes is judged: the ends of each half and
+/// [`JUDGED_PER_HALF`] − 1 points inside it. On each half u is linear,
+/// so u′ is constant, and x and u vary only slowly between these points;
+/// the inside points catch the geometry of dense-curve blends, whose
+/// curvature turns within an interval.
 struct JerkPoints<'n> {
     nodes: &'n [Node],
     k: usize,
-    x0: [f64; 4],
-    x1: [f64; 4],
-    xm: [f64; 4],
-    u0: [f64; 4],
-    um: [f64; 4],
-    u1: [f64; 4],
-    first_half: [f64; 4],
-    second_half: [f64; 4],
+    /// x at the start of each half and its u there and at its end.
+    starts: [[f64; 4]; 2],
+    ends: [[[f64; 4]; 2]; 2],
+    /// u′ on each half.
+    halves: [[f64; 4]; 2],
+    h: f64,
 }
 
 impl<'n> JerkPoints<'n> {
@@ -955,50 +1047,65 @@ impl<'n> JerkPoints<'n> {
         // The middle's u chosen so that x meets the next node's.
         let um: [f64; 4] = std::array::from_fn(|o| 2.0 * slope[o] - 0.5 * (u0[o] + u1[o]));
         let x0 = [0.0, 1.0, 0.0, 0.0];
-        let x1 = [0.0, 0.0, 1.0, 0.0];
+        // x = x0 + 2·∫u ds with u linear on each half.
         let xm = std::array::from_fn(|o| x0[o] + 0.5 * h * (u0[o] + um[o]));
         JerkPoints {
             nodes,
             k,
-            x0,
-            x1,
-            xm,
-            u0,
-            um,
-            u1,
-            first_half: std::array::from_fn(|o| 2.0 * (um[o] - u0[o]) / h),
-            second_half: std::array::from_fn(|o| 2.0 * (u1[o] - um[o]) / h),
+            starts: [x0, xm],
+            ends: [[u0, um], [um, u1]],
+            halves: [
+                std::array::from_fn(|o| 2.0 * (um[o] - u0[o]) / h),
+                std::array::from_fn(|o| 2.0 * (u1[o] - um[o]) / h),
+            ],
+            h,
         }
     }
 
-    fn points(&self) -> [JerkPoint<'n>; 4] {
+    fn points(&self) -> impl Iterator<Item = JerkPoint<'n>> + '_ {
         let (here, next) = (&self.nodes[self.k], &self.nodes[self.k + 1]);
-        [
-            JerkPoint {
-                geometry: &here.right,
-                x: self.x0,
-                u: self.u0,
-                slope: self.first_half,
-            },
-            JerkPoint {
-                geometry: &here.mid,
-                x: self.xm,
-                u: self.um,
-                slope: self.first_half,
-            },
-            JerkPoint {
-                geometry: &here.mid,
-                x: self.xm,
-                u: self.um,
-                slope: self.second_half,
-            },
-            JerkPoint {
-                geometry: &next.left,
-                x: self.x1,
-                u: self.u1,
-                slope: self.second_half,
-            },
-        ]
+        let stride = here.stride;
+        (0..JUDGED)
+            .filter(move |p| (p % (JUDGED_PER_HALF + 1)).is_multiple_of(stride))
+            .map(move |p| {
+                let (half, q) = (p / (JUDGED_PER_HALF + 1), p % (JUDGED_PER_HALF + 1));
+                let f = q as f64 / JUDGED_PER_HALF as f64;
+                // Points along the interval, in units of 1/(2·JUDGED_PER_HALF).
+                let step = half * JUDGED_PER_HALF + q;
+                let geometry = match step {
+                    0 => &here.right,
+                    _ if step == 2 * JUDGED_PER_HALF => &next.left,
+                    _ => &here.inner[step - 1],
+                };
+                let [ua, ub] = self.ends[half];
+                let x0 = self.starts[half];
+                JerkPoint {
+                    geometry,
+                    // x = x0 + h·(ua·f + (ub − ua)·f²/2) at a share f of the
+                    // half; the ends exactly as the nodes and the middle
+                    // have them (the interval's end is node k + 1's x).
+                    x: match (half, q) {
+                        (_, 0) => x0,
+                        (0, _) if q == JUDGED_PER_HALF => self.starts[1],
+                        (_, _) if q == JUDGED_PER_HALF => [0.0, 0.0, 1.0, 0.0],
+                        _ => std::array::from_fn(|o| {
+                            x0[o] + self.h * (ua[o] * f + 0.5 * (ub[o] - ua[o]) * f * f)
+                        }),
+                    },
+                    u: match q {
+                        0 => ua,
+                        _ if q == JUDGED_PER_HALF => ub,
+                        _ => std::array::from_fn(|o| ua[o] + f * (ub[o] - ua[o])),
+                    },
+                    slope: self.halves[half],
+                }
+            })
+    }
+
+    /// x at the start of the interval and at its middle (the forms the
+    /// floor on x away from the stops is put on).
+    fn start_and_middle(&self) -> [[f64; 4]; 2] {
+        self.starts
     }
 }
 
@@ -1471,6 +1578,53 @@ impl Schedule {
         Ok(out)
     }
 
+    /// The largest axis jerk use of the motion followed by length
+    /// ([`Interpolant::SpeedInLength`]) anywhere between moving nodes,
+    /// not only at the points the linear programs judge: the exact jerk
+    /// v·(p′·u′ + 3·p″·u + p‴·x) at `per_half` + 1 evenly spaced points
+    /// of each half interval, on the path's own geometry there. The
+    /// 1 ms samples of [`Schedule::sampled`] average the jerk over three
+    /// periods; this is the motion itself. Returns the use and where it
+    /// is largest: the segment index and the arc length into it, mm.
+    pub fn continuous_jerk(
+        &self,
+        segments: &[Segment],
+        kins: &dyn Kinematics,
+        per_half: usize,
+    ) -> Result<(f64, usize, f64), ScheduleError> {
+        let limits = axis_limits(kins)?;
+        let nodes = &self.nodes;
+        let x: Vec<f64> = self.v.iter().map(|v| v * v).collect();
+        let profile = LengthProfile::new(nodes, &x);
+        let per_half = per_half.max(1);
+        let mut worst = (0.0, 0, 0.0);
+        for (k, piece) in profile.pieces.iter().enumerate() {
+            let Piece::Smooth(halves) = *piece else {
+                continue;
+            };
+            let Halves { h, u0, um, u1, .. } = halves;
+            let segment = nodes[k + 1].segment;
+            let base = nodes[k + 1].at - h;
+            for (half, (ua, ub)) in [(u0, um), (um, u1)].into_iter().enumerate() {
+                let slope = 2.0 * (ub - ua) / h;
+                for q in 0..=per_half {
+                    let f = q as f64 / per_half as f64;
+                    let d = 0.5 * h * (half as f64 + f);
+                    let (u, xp) = (ua + f * (ub - ua), halves.x(d).max(0.0));
+                    let g = Geometry::at(&segments[segment], base + d);
+                    for i in 0..9 {
+                        let j = xp.sqrt() * (g.t[i] * slope + 3.0 * g.c[i] * u + g.d[i] * xp);
+                        let use_ = j.abs() / limits.j[i];
+                        if use_ > worst.0 {
+                            worst = (use_, segment, base + d);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(worst)
+    }
+
     /// Largest axis velocity, acceleration and jerk use: velocity at the
     /// nodes; acceleration and jerk at the ends and middle of every
     /// interval in motion at both ends, as [`Interpolant::SpeedInLength`]
@@ -1536,7 +1690,8 @@ mod tests {
         Node {
             left: Geometry::default(),
             right: Geometry::default(),
-            mid: Geometry::default(),
+            inner: [Geometry::default(); INNER],
+            stride: 1,
             xmax: f64::INFINITY,
             h,
             smooth: true,
@@ -1607,5 +1762,88 @@ mod tests {
         assert!((profile.duration(3) - 3.0 * h / x[3].sqrt()).abs() < 1e-15);
         let d = profile.position(3, profile.duration(3), 0.0);
         assert!((d - h).abs() < 1e-15, "{d}");
+    }
+
+    /// The rows judge the motion at points of an interval through
+    /// linear forms in the nodes' x; applied to a schedule they give the
+    /// x, u = ½·dx/ds and u′ of the motion followed by length there
+    /// (differentiated numerically), on intervals of unequal length.
+    #[test]
+    fn the_judged_points_see_the_motion_followed_by_length() {
+        let lengths = [0.01, 0.013, 0.008, 0.011, 0.0];
+        let x = [20.0, 31.0, 44.0, 47.0, 45.0];
+        let nodes: Vec<Node> = lengths.iter().map(|&h| node(h)).collect();
+        let profile = LengthProfile::new(&nodes, &x);
+        let k = 2;
+        let Piece::Smooth(halves) = profile.pieces[k] else {
+            panic!("interval {k} is between moving nodes");
+        };
+        let h = lengths[k];
+        let points = JerkPoints::new(&nodes, k, |_| false);
+        let per = JUDGED_PER_HALF as f64;
+        let places: Vec<f64> = (0..JUDGED)
+            .map(|p| {
+                let (half, q) = (p / (JUDGED_PER_HALF + 1), p % (JUDGED_PER_HALF + 1));
+                0.5 * (half as f64 + q as f64 / per)
+            })
+            .collect();
+        // x is a quadratic on each half, so one-sided differences within
+        // the half are exact but for rounding, at any step inside it.
+        let e = 0.2 * h / per;
+        for (p, point) in points.points().enumerate() {
+            let d = places[p] * h;
+            let side = if p <= JUDGED_PER_HALF { -1.0 } else { 1.0 };
+            let inside = if p == 0 || p + 1 == JUDGED {
+                -side
+            } else {
+                side
+            };
+            let near = |n: f64| halves.x(d + inside * n * e);
+            let u = 0.5 * inside * (-1.5 * near(0.0) + 2.0 * near(1.0) - 0.5 * near(2.0)) / e;
+            let slope = 0.5 * (near(0.0) - 2.0 * near(1.0) + near(2.0)) / (e * e);
+            let value = |form: &[f64; 4]| apply(form, &x, k - 1);
+            assert!(
+                (value(&point.x) - halves.x(d)).abs() < 1e-12,
+                "x at point {p}"
+            );
+            assert!(
+                (value(&point.u) - u).abs() < 1e-9 * u.abs().max(1.0),
+                "u at point {p}: {} against {u}",
+                value(&point.u)
+            );
+            assert!(
+                (value(&point.slope) - slope).abs() < 1e-9 * slope.abs().max(1.0),
+                "u′ at point {p}: {} against {slope}",
+                value(&point.slope)
+            );
+        }
+    }
+
+    /// An interval's judged points thin out where its geometry runs
+    /// straight between them: constant or linear geometry is judged at
+    /// the halves' ends alone, a curvature with a kink at the quarters
+    /// at the quarters too, and one with a kink at an eighth at every
+    /// point.
+    #[test]
+    fn judged_points_thin_out_where_the_geometry_runs_straight() {
+        let with = |curvature: &dyn Fn(usize) -> f64| {
+            let g = |j: usize| {
+                let mut g = Geometry::default();
+                g.t[0] = 1.0;
+                g.c[1] = curvature(j);
+                g
+            };
+            let inner: [Geometry; INNER] = std::array::from_fn(|j| g(j + 1));
+            stride(&g(0), &inner, &g(INNER + 1))
+        };
+        assert_eq!(with(&|_| 0.5), JUDGED_PER_HALF);
+        assert_eq!(with(&|j| 0.5 + 0.1 * j as f64), JUDGED_PER_HALF);
+        assert_eq!(with(&|j| (j as f64 - 2.0).abs()), 2);
+        assert_eq!(with(&|j| (j as f64 - 3.0).abs()), 1);
+        // A stray under the share is let through, one over it is not.
+        let bump = |size: f64| move |j: usize| if j == 1 { size } else { 0.0 } + j as f64;
+        let top = (INNER + 1) as f64;
+        assert_eq!(with(&bump(0.5 * GEOMETRY_STRAY * top)), JUDGED_PER_HALF);
+        assert_eq!(with(&bump(2.0 * GEOMETRY_STRAY * top)), 1);
     }
 }
