@@ -368,3 +368,79 @@ fn the_spindle_override_scales_the_commanded_spindle_speed() {
     tick.tick();
     assert_eq!(tick.setpoints().spindle_speed, rpm * 0.8);
 }
+
+/// The executor's half of third-order planning: a `Follower` running a
+/// jerk-limited schedule's intervals handed over through a lock-free ring,
+/// as a planner solving ahead in windows would hand them, allocates
+/// nothing in its tick. When the ring runs dry it waits where it is and
+/// carries on when intervals come: the samples are those of the same
+/// schedule followed in one go, to the bit.
+#[test]
+fn a_schedule_is_followed_through_a_ring_without_allocating() {
+    use kerf_motion::schedule::{schedule, Follower, Sample, ScheduleConfig};
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -5.0);
+    let program = "G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\nM2\n";
+    let segments = plan_program(
+        Interpreter::from_text(program, "rt.ngc", start),
+        kins,
+        start,
+        PlannerConfig::default(),
+        1,
+    )
+    .unwrap();
+    let config = ScheduleConfig {
+        ds: 0.02,
+        ..ScheduleConfig::default()
+    };
+    let intervals = schedule(&segments, kins, config).unwrap().intervals();
+    assert!(intervals.len() > 500, "{} intervals", intervals.len());
+
+    // In one go, from the whole list.
+    let mut whole = Follower::new(0.001);
+    let mut all = intervals.iter().copied();
+    let mut expected = Vec::new();
+    while let Some(sample) = whole.tick(&mut all) {
+        expected.push(sample);
+    }
+    assert!(expected.len() > 100, "{} samples", expected.len());
+
+    // Through a ring of 64, refilled 4 at a time every 5 periods: the
+    // follower outruns the planner and waits.
+    let (mut producer, mut consumer) = rtrb::RingBuffer::new(64);
+    let mut follower = Follower::new(0.001);
+    let mut got: Vec<Sample> = Vec::with_capacity(expected.len() + 1);
+    let (mut handed, mut dry) = (0, 0);
+    let mut periods = 0u64;
+    // Until every interval is handed over and the follower has run past
+    // them all.
+    let mut finished = false;
+    while !finished && periods < 10_000_000 {
+        if periods.is_multiple_of(5) {
+            for interval in intervals.iter().skip(handed).take(4) {
+                if producer.push(*interval).is_err() {
+                    break;
+                }
+                handed += 1;
+            }
+        }
+        COUNTING.with(|c| c.set(true));
+        let sample = follower.tick(&mut std::iter::from_fn(|| consumer.pop().ok()));
+        COUNTING.with(|c| c.set(false));
+        match sample {
+            Some(sample) => got.push(sample),
+            None if handed == intervals.len() => finished = true,
+            None => dry += 1,
+        }
+        periods += 1;
+    }
+    assert_eq!(
+        ALLOCATIONS.load(Ordering::Relaxed),
+        0,
+        "the follower's tick allocated"
+    );
+    assert!(dry > 0, "the ring never ran dry: the test tests nothing");
+    assert_eq!(got, expected);
+    assert_eq!(follower.passed_time(), whole.passed_time());
+}

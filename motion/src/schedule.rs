@@ -72,8 +72,10 @@
 //! [`schedule`] refuses machines that have them.
 
 mod banded;
+mod follow;
 
 use banded::{BandedLp, Failure};
+pub use follow::{Follower, Interval, Sample};
 
 use crate::bound::arc_third;
 use crate::kinematics::Kinematics;
@@ -1419,8 +1421,14 @@ impl<'a> LengthProfile<'a> {
 
     /// How long interval `k` lasts, s.
     fn duration(&self, k: usize) -> f64 {
-        let h = self.nodes[k].h;
-        match self.pieces[k] {
+        self.pieces[k].duration(self.nodes[k].h)
+    }
+}
+
+impl Piece {
+    /// How long an interval of length `h` with this speed lasts, s.
+    fn duration(&self, h: f64) -> f64 {
+        match *self {
             Piece::Out { x1 } => 3.0 * h / x1.sqrt(),
             Piece::In { x0 } => 3.0 * h / x0.sqrt(),
             Piece::Smooth(halves) => halves.time(h),
@@ -1428,11 +1436,10 @@ impl<'a> LengthProfile<'a> {
         }
     }
 
-    /// Arc length into interval `k` at time `t` into it, searched from
-    /// `near` (an earlier sample's position in it, or 0).
-    fn position(&self, k: usize, t: f64, near: f64) -> f64 {
-        let h = self.nodes[k].h;
-        match self.pieces[k] {
+    /// Arc length into an interval of length `h` at time `t` into it,
+    /// searched from `near` (an earlier sample's position in it, or 0).
+    fn position(&self, h: f64, t: f64, near: f64) -> f64 {
+        match *self {
             // t = 3·h^{2/3}·d^{1/3}/√x1.
             Piece::Out { x1 } => (h * (t * x1.sqrt() / (3.0 * h)).powi(3)).min(h),
             Piece::In { x0 } => {
@@ -1446,6 +1453,29 @@ impl<'a> LengthProfile<'a> {
 }
 
 impl Schedule {
+    /// The schedule as a [`Follower`] runs it: its speed in arc length
+    /// ([`Interpolant::SpeedInLength`]) interval by interval, in order,
+    /// the zero-length steps out of stops left out.
+    pub fn intervals(&self) -> Vec<Interval> {
+        let nodes = &self.nodes;
+        let x: Vec<f64> = self.v.iter().map(|v| v * v).collect();
+        let profile = LengthProfile::new(nodes, &x);
+        (0..nodes.len().saturating_sub(1))
+            .filter(|&k| nodes[k].h > 0.0)
+            .map(|k| {
+                let length = nodes[k].h;
+                let end = &nodes[k + 1];
+                Interval {
+                    segment: end.segment,
+                    from: end.at - length,
+                    length,
+                    duration: profile.duration(k),
+                    piece: profile.pieces[k],
+                }
+            })
+            .collect()
+    }
+
     /// Motion time (without dwells), s.
     fn motion_time(&self) -> f64 {
         self.time - self.dwell
@@ -1529,46 +1559,63 @@ impl Schedule {
                 }
             }
         };
-        // Time at the start of the interval, and of the next sample;
-        // samples in a row taken in motion.
-        let (mut begun, mut samples, mut run) = (0.0, 1u64, 0);
-        for k in 0..n.saturating_sub(1) {
-            let h = nodes[k].h;
-            if h == 0.0 {
-                continue;
-            }
-            let (v0, v1) = (self.v[k], self.v[k + 1]);
-            let lasts = match &profile {
-                None => interval_time(h, v0, v1),
-                Some(profile) => profile.duration(k),
-            };
-            if !lasts.is_finite() {
+        // Samples in a row taken in motion.
+        let mut run = 0;
+        if between == Interpolant::SpeedInLength {
+            // Followed as the executor would: a `Follower` over the
+            // intervals.
+            let intervals = self.intervals();
+            if intervals.iter().any(|i| !i.duration.is_finite()) {
                 // A stretch that stands still: no motion to sample.
                 out.time = f64::INFINITY;
                 return Ok(out);
             }
-            let segment = &segments[nodes[k + 1].segment];
-            let base = nodes[k + 1].at - h;
-            let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
-            // Where the last sample was found, for the next one's search.
-            let mut near = 0.0;
-            while samples as f64 * period <= begun + lasts {
-                let t = samples as f64 * period - begun;
-                let ds = match &profile {
-                    None => quintic_position(h, lasts, [v0, accel[k]], [v1, accel[k + 1]], t),
-                    Some(profile) => {
-                        near = profile.position(k, t, near);
-                        near
-                    }
-                };
-                // A sample's jerk spans it and the three before.
+            let node_of: Vec<usize> = (0..n.saturating_sub(1))
+                .filter(|&k| nodes[k].h > 0.0)
+                .collect();
+            debug_assert_eq!(node_of.len(), intervals.len());
+            let mut follower = Follower::new(period);
+            let mut queue = intervals.iter().copied();
+            while let Some(sample) = follower.tick(&mut queue) {
+                let k = node_of[sample.interval];
+                let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
                 run = if in_motion { run + 1 } else { 0 };
-                see(segment.shape.point(base + ds), run >= 4, &mut out);
-                samples += 1;
+                // A sample's jerk spans it and the three before.
+                see(
+                    segments[sample.segment].shape.point(sample.at),
+                    run >= 4,
+                    &mut out,
+                );
             }
-            begun += lasts;
+            out.time = follower.passed_time();
+        } else {
+            // Time at the start of the interval, and of the next sample.
+            let (mut begun, mut samples) = (0.0, 1u64);
+            for k in 0..n.saturating_sub(1) {
+                let h = nodes[k].h;
+                if h == 0.0 {
+                    continue;
+                }
+                let (v0, v1) = (self.v[k], self.v[k + 1]);
+                let lasts = interval_time(h, v0, v1);
+                if !lasts.is_finite() {
+                    out.time = f64::INFINITY;
+                    return Ok(out);
+                }
+                let segment = &segments[nodes[k + 1].segment];
+                let base = nodes[k + 1].at - h;
+                let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
+                while samples as f64 * period <= begun + lasts {
+                    let t = samples as f64 * period - begun;
+                    let ds = quintic_position(h, lasts, [v0, accel[k]], [v1, accel[k + 1]], t);
+                    run = if in_motion { run + 1 } else { 0 };
+                    see(segment.shape.point(base + ds), run >= 4, &mut out);
+                    samples += 1;
+                }
+                begun += lasts;
+            }
+            out.time = begun;
         }
-        out.time = begun;
         // At rest at the end.
         let end = &nodes[n - 1];
         let end = segments[end.segment].shape.point(end.at);
@@ -1754,13 +1801,13 @@ mod tests {
         let lasts = profile.duration(1);
         assert!((lasts - fine).abs() < 1e-9 * fine, "{lasts} against {fine}");
         for share in [0.1, 0.37, 0.5, 0.8, 0.999] {
-            let d = profile.position(1, share * lasts, 0.0);
+            let d = profile.pieces[1].position(h, share * lasts, 0.0);
             let back = halves.time(d);
             assert!((back - share * lasts).abs() < 1e-12, "{share}: {back}");
         }
         // Into the stop at the end: the constant-jerk ramp, 3h/v long.
         assert!((profile.duration(3) - 3.0 * h / x[3].sqrt()).abs() < 1e-15);
-        let d = profile.position(3, profile.duration(3), 0.0);
+        let d = profile.pieces[3].position(h, profile.duration(3), 0.0);
         assert!((d - h).abs() < 1e-15, "{d}");
     }
 
