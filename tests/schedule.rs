@@ -490,3 +490,56 @@ fn a_schedule_followed_by_its_speed_in_arc_length_keeps_the_limits_on_its_sample
         );
     }
 }
+
+/// Solved as the segments arrive, window by window, the schedule hands on
+/// the same intervals, to the bit, as solved with the whole program in
+/// hand, and hands each one on while the program is still arriving
+/// (before its end is known): a program of stops, corners, an arc, a
+/// dense curve and a line long enough for many windows.
+#[test]
+fn a_schedule_solved_as_the_segments_arrive_is_the_whole_programs() {
+    use kerf_motion::schedule::ScheduleStream;
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -5.0);
+    let program = corners_arc_and_curve().replace("M2\n", "G1 X62 F6000\nG4 P0.2\nY56\nM2\n");
+    let segments = planned(&program, kins, start);
+    let window = Window {
+        horizon: 100,
+        commit: 50,
+    };
+    let config = ScheduleConfig {
+        window: Some(window),
+        ..config()
+    };
+    let whole = schedule(&segments, kins, config).unwrap();
+    assert!(whole.windows > 10, "{} windows", whole.windows);
+    assert!(whole.stretches >= 3, "{} stretches", whole.stretches);
+    let expected = whole.intervals();
+
+    let mut stream = ScheduleStream::new(kins, config, window).unwrap();
+    let mut got = Vec::new();
+    // How many intervals were handed on before the last segment came.
+    let mut early = 0;
+    for (i, segment) in segments.iter().enumerate() {
+        stream.push(segment, &mut |interval| got.push(interval));
+        if i + 2 == segments.len() {
+            early = got.len();
+        }
+    }
+    stream.finish(&mut |interval| got.push(interval));
+    assert_eq!(got.len(), expected.len());
+    for (k, (got, expected)) in got.iter().zip(&expected).enumerate() {
+        assert_eq!(got, expected, "interval {k}");
+    }
+    assert!(
+        early > expected.len() / 2,
+        "{early} of {} intervals before the last segment",
+        expected.len()
+    );
+    let (windows, failed, rests) = stream.counts();
+    assert_eq!(
+        (windows, failed, rests),
+        (whole.windows, whole.failed, whole.window_rests)
+    );
+}

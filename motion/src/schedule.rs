@@ -397,6 +397,185 @@ pub fn schedule(
     Ok(path.solve())
 }
 
+/// A schedule solved as the planned segments arrive, window by window
+/// ([`Window`]), handing on each interval as soon as its speed is
+/// committed: the planner-side half of third-order planning, feeding a
+/// [`Follower`]. It hands on exactly the intervals
+/// [`schedule`] with the same window would (`tests/schedule.rs`), but
+/// runs only as far ahead as the segments it has been given: a window is
+/// solved once the path reaches past its end, and a stretch ends at a stop
+/// (or at [`ScheduleStream::finish`]). Dwells are left to the executor.
+///
+/// Every node stays in memory for the life of the stream (about 2 kB a
+/// node, 200 a millimetre at the default spacing): fine for a program
+/// checked offline, not yet for a daemon running one for days.
+pub struct ScheduleStream {
+    sampler: Sampler,
+    window: Window,
+    /// Segments pushed (the next one's index).
+    segments: usize,
+    /// x at every node, committed below `known`.
+    x: Vec<f64>,
+    known: usize,
+    /// The first node of the stretch being solved, and its windows once
+    /// it is known to need them.
+    stretch: usize,
+    windows: Option<Windows>,
+    /// The next interval to hand on (its first node).
+    next: usize,
+    /// Counters, as [`Schedule`] keeps them.
+    counts: Schedule,
+}
+
+impl ScheduleStream {
+    /// A stream for `kins` (its axes' limits) under `config`, solved in
+    /// windows of `window`.
+    pub fn new(
+        kins: &dyn Kinematics,
+        config: ScheduleConfig,
+        window: Window,
+    ) -> Result<ScheduleStream, ScheduleError> {
+        let limits = axis_limits(kins)?;
+        Ok(ScheduleStream {
+            sampler: Sampler {
+                limits,
+                config: ScheduleConfig {
+                    window: Some(window),
+                    ..config
+                },
+                nodes: Vec::new(),
+                rest: true,
+                dwell: 0.0,
+            },
+            window,
+            segments: 0,
+            x: Vec::new(),
+            known: 0,
+            stretch: 0,
+            windows: None,
+            next: 0,
+            counts: Schedule::empty(0.0),
+        })
+    }
+
+    /// Takes the next planned segment and hands `out` every interval this
+    /// lets the stream commit.
+    pub fn push(&mut self, segment: &Segment, out: &mut impl FnMut(Interval)) {
+        self.sampler.push(self.segments, segment);
+        self.segments += 1;
+        self.advance(false, out);
+    }
+
+    /// The program has ended: the motion comes to rest at the last node,
+    /// and `out` gets every interval still held.
+    pub fn finish(&mut self, out: &mut impl FnMut(Interval)) {
+        if let Some(last) = self.sampler.nodes.last_mut() {
+            last.xmax = 0.0;
+        }
+        self.advance(true, out);
+    }
+
+    /// Windows solved, linear programs given up (their windows keeping an
+    /// earlier pass), and windows that found nothing and followed the one
+    /// before to rest.
+    pub fn counts(&self) -> (usize, usize, usize) {
+        (
+            self.counts.windows,
+            self.counts.failed,
+            self.counts.window_rests,
+        )
+    }
+
+    fn advance(&mut self, finished: bool, out: &mut impl FnMut(Interval)) {
+        let n = self.sampler.nodes.len();
+        // The last node changes with the next segment (its junction caps,
+        // or a stop); the others are final.
+        let settled = if finished { n } else { n.saturating_sub(1) };
+        if self.x.len() < n {
+            self.x.resize(n, 0.0);
+        }
+        while self.stretch + 1 < settled {
+            let nodes = &self.sampler.nodes;
+            let start = self.stretch;
+            let stop = (start + 1..settled).find(|&k| nodes[k].xmax == 0.0);
+            let (span, complete) = match stop {
+                Some(stop) => (&nodes[start..=stop], true),
+                None => (&nodes[start..settled], false),
+            };
+            let m = span.len();
+            if self.windows.is_none() {
+                if complete && m <= self.window.horizon + 1 {
+                    // Short enough to solve whole, as `schedule` does.
+                    if span.iter().any(|node| node.xmax > 0.0) {
+                        self.counts.stretches += 1;
+                        let guess = self.sampler.first_guess(span, Start::Rest, None);
+                        let x = self
+                            .sampler
+                            .passes(span, Start::Rest, guess, &mut self.counts)
+                            .unwrap_or_else(|| vec![0.0; m]);
+                        for (k, &x) in x.iter().enumerate() {
+                            self.x[start + k] = as_speed_squared(x);
+                        }
+                    }
+                    self.known = start + m;
+                    self.stretch = start + m - 1;
+                    self.hand_on(out);
+                    continue;
+                }
+                if !complete && m <= self.window.horizon + 1 {
+                    // Whole or in windows: not known yet.
+                    return;
+                }
+                self.counts.stretches += 1;
+                self.windows = Some(Windows::new(m));
+            }
+            let windows = self.windows.as_mut().expect("set above");
+            let step = windows.next(&self.sampler, span, complete, self.window, &mut self.counts);
+            for (k, &x) in windows.x[..windows.committed].iter().enumerate() {
+                self.x[start + k] = as_speed_squared(x);
+            }
+            self.known = start + windows.committed;
+            match step {
+                WindowStep::Committed => self.hand_on(out),
+                WindowStep::Done => {
+                    self.windows = None;
+                    self.stretch = start + m - 1;
+                    self.hand_on(out);
+                }
+                WindowStep::NeedMore => return,
+            }
+        }
+        if finished {
+            self.known = n;
+            self.hand_on(out);
+        }
+    }
+
+    /// Hands on every interval whose speed is now known: both its nodes'
+    /// x and the x its nodes' u is taken from.
+    fn hand_on(&mut self, out: &mut impl FnMut(Interval)) {
+        let nodes = &self.sampler.nodes;
+        while self.next + 1 < self.known {
+            let k = self.next;
+            let ready = k + 2 < self.known || self.x[k + 1] == 0.0;
+            if !ready {
+                return;
+            }
+            if nodes[k].h > 0.0 {
+                out(interval(nodes, &self.x, k));
+            }
+            self.next += 1;
+        }
+    }
+}
+
+/// A solved x as the schedule keeps it, through its speed v = √x (so that
+/// a stream's intervals are a whole schedule's to the bit).
+fn as_speed_squared(x: f64) -> f64 {
+    let v = x.max(0.0).sqrt();
+    v * v
+}
+
 /// Builds the nodes, then solves.
 struct Sampler {
     limits: AxisLimits,
@@ -524,19 +703,10 @@ impl Sampler {
 
     fn solve(mut self) -> Schedule {
         let n = self.nodes.len();
-        let mut out = Schedule {
-            time: self.dwell,
-            dwell: self.dwell,
-            s: Vec::with_capacity(n),
-            v: vec![0.0; n],
-            step: vec![0.0; n],
-            stretches: 0,
-            windows: 0,
-            window_rests: 0,
-            solves: 0,
-            failed: 0,
-            nodes: Vec::new(),
-        };
+        let mut out = Schedule::empty(self.dwell);
+        out.s.reserve(n);
+        out.v = vec![0.0; n];
+        out.step = vec![0.0; n];
         if n == 0 {
             return out;
         }
@@ -584,74 +754,9 @@ impl Sampler {
 
     /// One stretch window by window (see [`Window`]).
     fn windowed(&self, nodes: &[Node], window: Window, out: &mut Schedule) -> Vec<f64> {
-        let m = nodes.len();
-        let commit = window.commit.clamp(4, window.horizon.max(5) - 1);
-        let mut x = vec![0.0; m];
-        // The window starts at node `begin`, in state `from`.
-        let (mut begin, mut from) = (0, Start::Rest);
-        // The last window solved: its first node and its solution, which
-        // ends at rest.
-        let mut last: Option<(usize, Vec<f64>)> = None;
-        loop {
-            let end = (begin + window.horizon).min(m - 1);
-            let span = &nodes[begin..=end];
-            out.windows += 1;
-            let guess = self.first_guess(
-                span,
-                from,
-                last.as_ref().map(|(at, sol)| &sol[begin - at..]),
-            );
-            let mut solved = self.passes(span, from, guess, out);
-            if solved.is_none() {
-                // The first guess can linearise the jerk limit more
-                // tightly than the window before did, so tightly that the
-                // committed state has no continuation. Linearised about
-                // that window's own solution (at rest past its end), every
-                // row that window had holds that solution again (each
-                // jerk row's tangent now touches 1/√x there); only the
-                // jerk rows at its end node are new, loose at the guess's
-                // floor but not proven to hold.
-                if let Some((at, sol)) = &last {
-                    let mut guess = vec![0.0; span.len()];
-                    let before = &sol[begin - at..];
-                    guess[..before.len()].copy_from_slice(before);
-                    solved = self.passes(span, from, guess, out);
-                }
-            }
-            match solved {
-                Some(sol) if end == m - 1 => {
-                    x[begin..].copy_from_slice(&sol);
-                    return x;
-                }
-                Some(sol) => {
-                    let keep = begin + commit;
-                    x[begin..keep].copy_from_slice(&sol[..commit]);
-                    last = Some((begin, sol));
-                    begin = keep - 3;
-                    from = Start::Moving([x[begin], x[begin + 1], x[begin + 2]]);
-                }
-                None => {
-                    // Nothing within the limits from the committed state:
-                    // follow the last window's solution to its rest, as a
-                    // planner that runs ahead would, and start again from
-                    // there. With no such solution (the first window, or
-                    // one from rest), the stretch stands still, as a
-                    // stretch solved whole does.
-                    let Some((at, sol)) = last.take() else {
-                        x[begin..].fill(0.0);
-                        return x;
-                    };
-                    out.window_rests += 1;
-                    let rest = at + sol.len() - 1;
-                    x[begin..=rest].copy_from_slice(&sol[begin - at..]);
-                    if rest == m - 1 {
-                        return x;
-                    }
-                    begin = rest;
-                    from = Start::Rest;
-                }
-            }
-        }
+        let mut windows = Windows::new(nodes.len());
+        while windows.next(self, nodes, true, window, out) != WindowStep::Done {}
+        windows.x
     }
 
     /// The first linearisation point: half of what the acceleration
@@ -963,7 +1068,7 @@ impl Sampler {
 /// coefficients of x at nodes j − 1, j, j + 1: the end slope of a ramp to
 /// or from rest beside it, else the slopes of the intervals either side
 /// interpolated from their midpoints to the node. `rest(i)`: node i is a
-/// stop. (`LengthProfile::new` applies it to the schedule's values.)
+/// stop. ([`node_u`] applies it to the schedule's values.)
 fn node_slope(nodes: &[Node], j: usize, rest: impl Fn(usize) -> bool) -> [f64; 3] {
     let m = nodes.len();
     let before = j >= 1 && nodes[j - 1].h > 0.0;
@@ -1122,6 +1227,153 @@ fn interval_time(h: f64, v0: f64, v1: f64) -> f64 {
     }
 }
 
+/// A stretch solved window by window, one window a call, so that a
+/// planner can solve each window as the segments it spans arrive
+/// ([`ScheduleStream`]) or all of them in turn ([`Sampler::windowed`]).
+struct Windows {
+    /// x at the stretch's nodes, committed up to `committed`.
+    x: Vec<f64>,
+    committed: usize,
+    /// The next window starts at node `begin`, in state `from`.
+    begin: usize,
+    from: Start,
+    /// The last window solved: its first node and its solution, which
+    /// ends at rest.
+    last: Option<(usize, Vec<f64>)>,
+    /// No window had a solution from rest: the stretch stands still.
+    still: bool,
+}
+
+/// What one call of [`Windows::next`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum WindowStep {
+    /// Committed x up to `Windows::committed`; more windows to come.
+    Committed,
+    /// The stretch is solved to its end.
+    Done,
+    /// The next window reaches past the nodes there are so far.
+    NeedMore,
+}
+
+impl Windows {
+    /// A stretch of `m` nodes (as far as known) from rest.
+    fn new(m: usize) -> Windows {
+        Windows {
+            x: vec![0.0; m],
+            committed: 0,
+            begin: 0,
+            from: Start::Rest,
+            last: None,
+            still: false,
+        }
+    }
+
+    /// Solves the next window over `nodes` (the stretch's nodes so far;
+    /// all of them when `complete`, its last then the stop it ends at).
+    fn next(
+        &mut self,
+        sampler: &Sampler,
+        nodes: &[Node],
+        complete: bool,
+        window: Window,
+        out: &mut Schedule,
+    ) -> WindowStep {
+        let m = nodes.len();
+        if self.x.len() < m {
+            self.x.resize(m, 0.0);
+        }
+        if self.still {
+            self.committed = m;
+            return if complete {
+                WindowStep::Done
+            } else {
+                WindowStep::NeedMore
+            };
+        }
+        let commit = window.commit.clamp(4, window.horizon.max(5) - 1);
+        let end = self.begin + window.horizon;
+        let end = if complete {
+            end.min(m - 1)
+        } else if end < m {
+            end
+        } else {
+            return WindowStep::NeedMore;
+        };
+        let begin = self.begin;
+        let span = &nodes[begin..=end];
+        out.windows += 1;
+        let guess = sampler.first_guess(
+            span,
+            self.from,
+            self.last.as_ref().map(|(at, sol)| &sol[begin - at..]),
+        );
+        let mut solved = sampler.passes(span, self.from, guess, out);
+        if solved.is_none() {
+            // The first guess can linearise the jerk limit more
+            // tightly than the window before did, so tightly that the
+            // committed state has no continuation. Linearised about
+            // that window's own solution (at rest past its end), every
+            // row that window had holds that solution again (each
+            // jerk row's tangent now touches 1/√x there); only the
+            // jerk rows at its end node are new, loose at the guess's
+            // floor but not proven to hold.
+            if let Some((at, sol)) = &self.last {
+                let mut guess = vec![0.0; span.len()];
+                let before = &sol[begin - at..];
+                guess[..before.len()].copy_from_slice(before);
+                solved = sampler.passes(span, self.from, guess, out);
+            }
+        }
+        match solved {
+            Some(sol) if complete && end == m - 1 => {
+                self.x[begin..].copy_from_slice(&sol);
+                self.committed = m;
+                WindowStep::Done
+            }
+            Some(sol) => {
+                let keep = begin + commit;
+                self.x[begin..keep].copy_from_slice(&sol[..commit]);
+                self.committed = keep;
+                self.last = Some((begin, sol));
+                self.begin = keep - 3;
+                let b = self.begin;
+                self.from = Start::Moving([self.x[b], self.x[b + 1], self.x[b + 2]]);
+                WindowStep::Committed
+            }
+            None => {
+                // Nothing within the limits from the committed state:
+                // follow the last window's solution to its rest, as a
+                // planner that runs ahead would, and start again from
+                // there. With no such solution (the first window, or
+                // one from rest), the stretch stands still, as a
+                // stretch solved whole does.
+                let Some((at, sol)) = self.last.take() else {
+                    self.x[begin..].fill(0.0);
+                    self.committed = m;
+                    // Until the stretch ends: the rest of it is committed
+                    // at rest as it arrives.
+                    self.still = true;
+                    return if complete {
+                        WindowStep::Done
+                    } else {
+                        WindowStep::Committed
+                    };
+                };
+                out.window_rests += 1;
+                let rest = at + sol.len() - 1;
+                self.x[begin..=rest].copy_from_slice(&sol[begin - at..]);
+                self.committed = rest + 1;
+                if complete && rest == m - 1 {
+                    return WindowStep::Done;
+                }
+                self.begin = rest;
+                self.from = Start::Rest;
+                WindowStep::Committed
+            }
+        }
+    }
+}
+
 /// Where a stretch or a window starts.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Start {
@@ -1246,7 +1498,7 @@ const GAUSS8: [(f64, f64); 4] = [
 ];
 
 /// One interval of [`Interpolant::SpeedInLength`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 enum Piece {
     /// Out of rest: x = x1·(d/h)^{4/3}.
     Out { x1: f64 },
@@ -1349,10 +1601,76 @@ impl Halves {
     }
 }
 
+/// u at node `k` in motion, by the rule the linear programs judge
+/// ([`node_slope`]); 0 at rest. Reads x at nodes k − 1 … k + 1 (where
+/// their coefficients are not zero).
+fn node_u(nodes: &[Node], x: &[f64], k: usize) -> f64 {
+    if x[k] == 0.0 {
+        return 0.0;
+    }
+    let form = node_slope(nodes, k, |i| x[i] == 0.0);
+    match k {
+        // Node 0 has no node before it; its form has no term there.
+        0 => apply(&form[1..], x, 0),
+        _ => apply(&form, x, k - 1),
+    }
+}
+
+/// The speed in arc length over interval `k` (from node k to k + 1),
+/// and whether it was flattened: where x would dip below half its ends'
+/// least value, taken linear in s instead (u constant, stepping at the
+/// nodes). Reads x at nodes k − 1 … k + 2.
+fn interval_piece(nodes: &[Node], x: &[f64], k: usize) -> (Piece, bool) {
+    let h = nodes[k].h;
+    let piece = match (x[k] > 0.0, x[k + 1] > 0.0) {
+        _ if h == 0.0 => Piece::Still,
+        (false, false) => Piece::Still,
+        (false, true) => Piece::Out { x1: x[k + 1] },
+        (true, false) => Piece::In { x0: x[k] },
+        (true, true) => {
+            let (u0, u1) = (node_u(nodes, x, k), node_u(nodes, x, k + 1));
+            let slope = (x[k + 1] - x[k]) / (2.0 * h);
+            // The middle chosen so that x meets the next node's.
+            let um = 2.0 * slope - 0.5 * (u0 + u1);
+            let halves = Halves {
+                h,
+                x0: x[k],
+                u0,
+                um,
+                u1,
+            };
+            if halves.lowest() < 0.5 * x[k].min(x[k + 1]) {
+                let flat = Halves {
+                    u0: slope,
+                    um: slope,
+                    u1: slope,
+                    ..halves
+                };
+                return (Piece::Smooth(flat), true);
+            }
+            Piece::Smooth(halves)
+        }
+    };
+    (piece, false)
+}
+
+/// Interval `k` as a [`Follower`] runs it. Reads x at nodes k − 1 … k + 2.
+fn interval(nodes: &[Node], x: &[f64], k: usize) -> Interval {
+    let length = nodes[k].h;
+    let (piece, _) = interval_piece(nodes, x, k);
+    let end = &nodes[k + 1];
+    Interval {
+        segment: end.segment,
+        from: end.at - length,
+        length,
+        duration: piece.duration(length),
+        piece,
+    }
+}
+
 /// The schedule's speed as a function of arc length, interval by
 /// interval ([`Interpolant::SpeedInLength`]).
-struct LengthProfile<'a> {
-    nodes: &'a [Node],
+struct LengthProfile {
     pieces: Vec<Piece>,
     /// Intervals where x would have dipped below half its ends' least
     /// value, taken linear in s instead (u constant, stepping at the
@@ -1360,68 +1678,18 @@ struct LengthProfile<'a> {
     flattened: usize,
 }
 
-impl<'a> LengthProfile<'a> {
-    fn new(nodes: &'a [Node], x: &[f64]) -> LengthProfile<'a> {
+impl LengthProfile {
+    fn new(nodes: &[Node], x: &[f64]) -> LengthProfile {
         let n = nodes.len();
-        // u at each node in motion, by the rule the linear programs judge
-        // (node 0 has no node before it; its form has no term there).
-        let u: Vec<f64> = (0..n)
+        let mut flattened = 0;
+        let pieces = (0..n.saturating_sub(1))
             .map(|k| {
-                if x[k] == 0.0 {
-                    return 0.0;
-                }
-                let form = node_slope(nodes, k, |i| x[i] == 0.0);
-                match k {
-                    0 => apply(&form[1..], x, 0),
-                    _ => apply(&form, x, k - 1),
-                }
+                let (piece, flat) = interval_piece(nodes, x, k);
+                flattened += usize::from(flat);
+                piece
             })
             .collect();
-        let mut flattened = 0;
-        let mut pieces = Vec::with_capacity(n.saturating_sub(1));
-        for k in 0..n.saturating_sub(1) {
-            let h = nodes[k].h;
-            pieces.push(match (x[k] > 0.0, x[k + 1] > 0.0) {
-                _ if h == 0.0 => Piece::Still,
-                (false, false) => Piece::Still,
-                (false, true) => Piece::Out { x1: x[k + 1] },
-                (true, false) => Piece::In { x0: x[k] },
-                (true, true) => {
-                    let (u0, u1) = (u[k], u[k + 1]);
-                    let slope = (x[k + 1] - x[k]) / (2.0 * h);
-                    // The middle chosen so that x meets the next node's.
-                    let um = 2.0 * slope - 0.5 * (u0 + u1);
-                    let halves = Halves {
-                        h,
-                        x0: x[k],
-                        u0,
-                        um,
-                        u1,
-                    };
-                    if halves.lowest() < 0.5 * x[k].min(x[k + 1]) {
-                        flattened += 1;
-                        Piece::Smooth(Halves {
-                            u0: slope,
-                            um: slope,
-                            u1: slope,
-                            ..halves
-                        })
-                    } else {
-                        Piece::Smooth(halves)
-                    }
-                }
-            });
-        }
-        LengthProfile {
-            nodes,
-            pieces,
-            flattened,
-        }
-    }
-
-    /// How long interval `k` lasts, s.
-    fn duration(&self, k: usize) -> f64 {
-        self.pieces[k].duration(self.nodes[k].h)
+        LengthProfile { pieces, flattened }
     }
 }
 
@@ -1453,26 +1721,31 @@ impl Piece {
 }
 
 impl Schedule {
+    /// No motion yet, `dwell` seconds of dwells.
+    fn empty(dwell: f64) -> Schedule {
+        Schedule {
+            time: dwell,
+            dwell,
+            s: Vec::new(),
+            v: Vec::new(),
+            step: Vec::new(),
+            stretches: 0,
+            windows: 0,
+            window_rests: 0,
+            solves: 0,
+            failed: 0,
+            nodes: Vec::new(),
+        }
+    }
+
     /// The schedule as a [`Follower`] runs it: its speed in arc length
     /// ([`Interpolant::SpeedInLength`]) interval by interval, in order,
     /// the zero-length steps out of stops left out.
     pub fn intervals(&self) -> Vec<Interval> {
-        let nodes = &self.nodes;
         let x: Vec<f64> = self.v.iter().map(|v| v * v).collect();
-        let profile = LengthProfile::new(nodes, &x);
-        (0..nodes.len().saturating_sub(1))
-            .filter(|&k| nodes[k].h > 0.0)
-            .map(|k| {
-                let length = nodes[k].h;
-                let end = &nodes[k + 1];
-                Interval {
-                    segment: end.segment,
-                    from: end.at - length,
-                    length,
-                    duration: profile.duration(k),
-                    piece: profile.pieces[k],
-                }
-            })
+        (0..self.nodes.len().saturating_sub(1))
+            .filter(|&k| self.nodes[k].h > 0.0)
+            .map(|k| interval(&self.nodes, &x, k))
             .collect()
     }
 
@@ -1798,7 +2071,7 @@ mod tests {
                 h / n as f64 / halves.x(s).sqrt()
             })
             .sum();
-        let lasts = profile.duration(1);
+        let lasts = profile.pieces[1].duration(h);
         assert!((lasts - fine).abs() < 1e-9 * fine, "{lasts} against {fine}");
         for share in [0.1, 0.37, 0.5, 0.8, 0.999] {
             let d = profile.pieces[1].position(h, share * lasts, 0.0);
@@ -1806,8 +2079,9 @@ mod tests {
             assert!((back - share * lasts).abs() < 1e-12, "{share}: {back}");
         }
         // Into the stop at the end: the constant-jerk ramp, 3h/v long.
-        assert!((profile.duration(3) - 3.0 * h / x[3].sqrt()).abs() < 1e-15);
-        let d = profile.pieces[3].position(h, profile.duration(3), 0.0);
+        let ramp = profile.pieces[3].duration(h);
+        assert!((ramp - 3.0 * h / x[3].sqrt()).abs() < 1e-15);
+        let d = profile.pieces[3].position(h, ramp, 0.0);
         assert!((d - h).abs() < 1e-15, "{d}");
     }
 

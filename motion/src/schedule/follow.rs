@@ -20,7 +20,7 @@ use super::Piece;
 
 /// One interval of a schedule as it is followed: where it lies on the
 /// path and how its speed varies along it.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Interval {
     /// The planned segment the interval lies on (its index in the
     /// segments the schedule was made from).
