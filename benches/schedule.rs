@@ -26,7 +26,7 @@ use std::time::Instant;
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::{self, plan_program, RunConfig};
-use kerf_motion::schedule::{schedule, Interpolant, ScheduleConfig, Window};
+use kerf_motion::schedule::{schedule, Follower, Interpolant, Interval, ScheduleConfig, Window};
 use kerf_motion::{Kinematics, PathMode, PlannerConfig};
 
 /// One program's row, its schedule solved as `solve` says (the command's
@@ -67,8 +67,9 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
     let (continuous, _, _) = found
         .continuous_jerk(&segments, kins, 16)
         .expect("mill3 has trivial kinematics");
+    let tick = follower_tick_cost(&found.intervals(), planner.period);
     println!(
-        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}  {:>10.3} s {:>5.3} {:>5.3} {:>6.3} {:>6.3} {:>4} {:>6.3}",
+        "{name:<30} {executor:>10.3} s {bound:>10.3} s {time:>10.3} s {:>7.3} {:>8.3} {:>9.3}  {:>5.3} {:>6.3} {:>6.3} {:>9} {:>6} {:>3} {:>6} {wall:>7.1} s  {:>5.3} {:>5.3} {:>6.3} {:>6.3}  {:>10.3} s {:>5.3} {:>5.3} {:>6.3} {:>6.3} {:>4} {:>6.3}  {tick}",
         executor / bound,
         time / bound,
         executor / time,
@@ -91,6 +92,30 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         by_length.flattened,
         continuous,
     );
+}
+
+/// Median, 99th percentile and largest wall time of a `Follower` tick
+/// over `intervals` at `period`, µs, as a table cell.
+fn follower_tick_cost(intervals: &[Interval], period: f64) -> String {
+    let motion: f64 = intervals.iter().map(|i| i.duration).sum();
+    let mut times: Vec<f64> = Vec::with_capacity((motion / period) as usize + 2);
+    let mut follower = Follower::new(period);
+    let mut queue = intervals.iter().copied();
+    loop {
+        let t0 = Instant::now();
+        let sample = follower.tick(&mut queue);
+        let took = t0.elapsed().as_secs_f64() * 1e6;
+        if sample.is_none() {
+            break;
+        }
+        times.push(took);
+    }
+    if times.is_empty() {
+        return "-".into();
+    }
+    times.sort_by(f64::total_cmp);
+    let at = |q: f64| times[((times.len() - 1) as f64 * q) as usize];
+    format!("{:.2}/{:.2}/{:.1}", at(0.5), at(0.99), at(1.0))
 }
 
 fn main() {
@@ -132,7 +157,7 @@ fn main() {
     };
     println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}");
     println!(
-        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4} {:>6}",
+        "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4} {:>6}  {}",
         "program",
         "executor",
         "bound",
@@ -158,7 +183,8 @@ fn main() {
         "j@T",
         "moving",
         "flat",
-        "cont j"
+        "cont j",
+        "tick µs med/p99/max"
     );
     row(
         "circle R20, 0.05 mm chords",
@@ -196,5 +222,7 @@ fn main() {
     println!("  first a quintic in time between nodes, then (by length: its motion time) the speed as a function of arc");
     println!("  length that the schedule's rows judge (Interpolant::SpeedInLength); moving: the jerk away from stops;");
     println!("  flat: intervals followed at constant acceleration where that speed would dip towards rest;");
-    println!("  cont j: the jerk of that motion itself, between the samples (Schedule::continuous_jerk, 33 points an interval)");
+    println!("  cont j: the jerk of that motion itself, between the samples (Schedule::continuous_jerk, 33 points an interval);");
+    println!("tick: wall time of one schedule::Follower tick through the schedule's intervals (the executor's share of");
+    println!("  third-order planning; positions on the path not included), this machine's clock, reported, not a bound");
 }

@@ -406,9 +406,9 @@ pub fn schedule(
 /// solved once the path reaches past its end, and a stretch ends at a stop
 /// (or at [`ScheduleStream::finish`]). Dwells are left to the executor.
 ///
-/// Every node stays in memory for the life of the stream (about 2 kB a
-/// node, 200 a millimetre at the default spacing): fine for a program
-/// checked offline, not yet for a daemon running one for days.
+/// It holds the nodes it has not handed on and those its windows still
+/// read (about 2 kB a node, 100 a millimetre at the default spacing), and
+/// drops the rest: a window's worth, not the program's.
 pub struct ScheduleStream {
     sampler: Sampler,
     window: Window,
@@ -487,6 +487,46 @@ impl ScheduleStream {
     }
 
     fn advance(&mut self, finished: bool, out: &mut impl FnMut(Interval)) {
+        self.solve_what_it_can(finished, out);
+        self.forget_handed_on();
+    }
+
+    /// Nodes held: those not yet handed on, those the windows still read,
+    /// and up to [`FORGET_AT`] more.
+    pub fn held_nodes(&self) -> usize {
+        self.sampler.nodes.len()
+    }
+
+    /// Drops the nodes nothing will read again, once there are
+    /// [`FORGET_AT`] of them (one move of the rest for so many).
+    fn forget_handed_on(&mut self) {
+        // The next interval's u reads the node before it; the stretch
+        // being solved, from its first node or its windows' first.
+        let by_stretch = match &self.windows {
+            Some(windows) => self.stretch + windows.first_needed(),
+            None => self.stretch,
+        };
+        let cut = self.next.saturating_sub(1).min(by_stretch);
+        if cut < FORGET_AT {
+            return;
+        }
+        self.sampler.nodes.drain(..cut);
+        self.x.drain(..cut);
+        self.known -= cut;
+        self.next -= cut;
+        if cut > self.stretch {
+            let windows = self
+                .windows
+                .as_mut()
+                .expect("only windows read past the stretch's start");
+            windows.shift(cut - self.stretch);
+            self.stretch = 0;
+        } else {
+            self.stretch -= cut;
+        }
+    }
+
+    fn solve_what_it_can(&mut self, finished: bool, out: &mut impl FnMut(Interval)) {
         let n = self.sampler.nodes.len();
         // The last node changes with the next segment (its junction caps,
         // or a stop); the others are final.
@@ -568,6 +608,10 @@ impl ScheduleStream {
         }
     }
 }
+
+/// Nodes a [`ScheduleStream`] lets pile up before it drops those it no
+/// longer reads.
+const FORGET_AT: usize = 1024;
 
 /// A solved x as the schedule keeps it, through its speed v = √x (so that
 /// a stream's intervals are a whole schedule's to the bit).
@@ -1265,6 +1309,26 @@ impl Windows {
             from: Start::Rest,
             last: None,
             still: false,
+        }
+    }
+
+    /// The first node (of the stretch) the windows still read: the next
+    /// window's start, or the last window's solution's.
+    fn first_needed(&self) -> usize {
+        match &self.last {
+            Some((at, _)) => self.begin.min(*at),
+            None => self.begin,
+        }
+    }
+
+    /// Forgets the stretch's first `by` nodes (at most
+    /// [`Windows::first_needed`]): every index moves down by `by`.
+    fn shift(&mut self, by: usize) {
+        self.x.drain(..by);
+        self.committed -= by;
+        self.begin -= by;
+        if let Some((at, _)) = &mut self.last {
+            *at -= by;
         }
     }
 
