@@ -241,6 +241,12 @@ struct Geometry {
 }
 
 impl Geometry {
+    /// Axis `i`'s jerk, mm/s³, moving at x = v² with path acceleration u
+    /// = ½·dx/ds and its rate u′ = du/ds here: v·(p′·u′ + 3·p″·u + p‴·x).
+    fn jerk(&self, i: usize, x: f64, u: f64, slope: f64) -> f64 {
+        x.sqrt() * (self.t[i] * slope + 3.0 * self.c[i] * u + self.d[i] * x)
+    }
+
     /// The path's derivatives `s` mm into `segment`.
     fn at(segment: &Segment, s: f64) -> Geometry {
         let shape = &segment.shape;
@@ -1997,7 +2003,7 @@ impl Schedule {
                     let (u, xp) = (ua + f * (ub - ua), halves.x(d).max(0.0));
                     let g = Geometry::at(&segments[segment], base + d);
                     for i in 0..9 {
-                        let j = xp.sqrt() * (g.t[i] * slope + 3.0 * g.c[i] * u + g.d[i] * xp);
+                        let j = g.jerk(i, xp, u, slope);
                         let use_ = j.abs() / limits.j[i];
                         if use_ > worst.0 {
                             worst = (use_, segment, base + d);
@@ -2055,7 +2061,7 @@ impl Schedule {
                     value(&point.slope),
                 );
                 for i in 0..9 {
-                    let j = xp.sqrt() * (g.t[i] * slope + 3.0 * g.c[i] * u + g.d[i] * xp);
+                    let j = g.jerk(i, xp, u, slope);
                     use_.jerk = use_.jerk.max(j.abs() / limits.j[i]);
                     let a = g.t[i] * u + g.c[i] * xp;
                     use_.acceleration = use_.acceleration.max(a.abs() / limits.a[i]);
