@@ -15,7 +15,9 @@
 //! 4·J_i·T (what a 1 ms sampled trajectory within J_i allows; the planner
 //! uses J_i·T), and along the tangent |a| ≤ √(2·Ĵ·v) with Ĵ bounding the
 //! path's third derivative (the S-curve's slow start from rest and slow
-//! finish into it). Every trajectory along that
+//! finish into it), and v³ bending down along the path no faster than
+//! 3·Ĵ (the S-curve's rounded crests; "no crests" is the bound without
+//! it, as it was until session 35). Every trajectory along that
 //! path within the machine's limits meets these necessary conditions, so
 //! none is quicker: it is a lower bound. "Independent" means independent
 //! of the executor's online velocity profile, which is what the ratio
@@ -345,6 +347,11 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
     let t0 = Instant::now();
     let bound = bound::lower_bound(&segments, kins, BoundConfig::for_planner(&planner)).time;
     let bound_wall = t0.elapsed().as_secs_f64();
+    let uncrested = BoundConfig {
+        crests: false,
+        ..BoundConfig::for_planner(&planner)
+    };
+    let before = bound::lower_bound(&segments, kins, uncrested).time;
     let poly = match polyline_bound(program, kins, TOLERANCE) {
         Some(t) => format!("{t:>8.3} s"),
         None => format!("{:>10}", "-"),
@@ -358,7 +365,7 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
     };
     let most = [av, aa, aj, jv, ja, jj].into_iter().fold(0.0, f64::max);
     println!(
-        "{name:<33} {:>9.3} s {:>9.3} s {ratio:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s {:>8}  {ratio_verdict}, deviation {}, limits {}",
+        "{name:<33} {:>9.3} s {:>9.3} s {before:>9.3} s {ratio:>6.3} {poly} {:>7.5} mm  {av:>5.3} {aa:>6.3} {aj:>6.3}  {jv:>5.3} {ja:>6.3} {jj:>6.3} {wall:>7.2} s {bound_wall:>6.2} s {:>8}  {ratio_verdict}, deviation {}, limits {}",
         report.cycle_time,
         bound,
         report.max_deviation,
@@ -461,8 +468,8 @@ fn main() {
     println!("deviation from the programmed path; largest use of the axis and joint");
     println!("velocity, acceleration and jerk limits (must stay <= 1 + 1e-6)");
     println!(
-        "{:<33} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8} {:>8}",
-        "program", "planned", "bound", "ratio", "poly", "deviation",
+        "{:<33} {:>11} {:>11} {:>11} {:>6} {:>10} {:>10}  {:>5} {:>6} {:>6}  {:>5} {:>6} {:>6} {:>9} {:>8} {:>8}",
+        "program", "planned", "bound", "no crests", "ratio", "poly", "deviation",
         "ax v", "ax a", "ax j", "jt v", "jt a", "jt j", "run", "bound", "guarded"
     );
     let targeted = Some(TARGET_RATIO);

@@ -130,11 +130,29 @@ fn corners_arc_and_curve() -> String {
 
 /// The bound is a lower bound on every motion within the limits, the
 /// schedule is one such motion: corners, arcs and a dense curve, with
-/// stops and blends.
+/// stops and blends; and a dense CAM profile, where the bound's rounded
+/// crests (session 35) bind on almost every line.
 #[test]
 fn the_schedule_is_no_quicker_than_the_lower_bound() {
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
+    let (program, start) = stellabee_excerpt();
+    let (segments, schedule) = solved(&program, kins, start);
+    let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
+    let uncrested = BoundConfig {
+        crests: false,
+        ..BoundConfig::default()
+    };
+    let before = lower_bound(&segments, kins, uncrested).time;
+    eprintln!(
+        "excerpt: schedule {:.5} s, bound {bound:.5} s ({before:.5} s without crests)",
+        schedule.time
+    );
+    assert!(
+        schedule.time >= bound && bound > before,
+        "excerpt: schedule {:.5} s, bound {bound:.5} s, without crests {before:.5} s",
+        schedule.time
+    );
     let start = Position::xyz(50.0, 50.0, -10.0);
     let (segments, schedule) = solved(&corners_arc_and_curve(), kins, start);
     let bound = lower_bound(&segments, kins, BoundConfig::default()).time;

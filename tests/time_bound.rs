@@ -153,8 +153,15 @@ fn the_tangential_jerk_limit_slows_a_lines_start_and_end_but_not_below_the_s_cur
             )
         }
     };
+    // The ramps alone: the crests' rounding is left out here (see the
+    // next test).
+    let ramps = BoundConfig {
+        crests: false,
+        ..BoundConfig::default()
+    };
     for len in [0.05_f64, 0.5, 2.0, 200.0] {
-        let got = bound(&format!("G1 X{} F6000\nM2\n", 10.0 + len), kins, start).time;
+        let program = format!("G1 X{} F6000\nM2\n", 10.0 + len);
+        let got = bound_with(&program, kins, start, ramps).time;
         let (t, d) = up(feed);
         let relaxed = if 2.0 * d <= len {
             2.0 * t + (len - 2.0 * d) / feed
@@ -179,14 +186,113 @@ fn the_tangential_jerk_limit_slows_a_lines_start_and_end_but_not_below_the_s_cur
         );
         assert!(got <= optimum, "{len}: {got} above the S-curve {optimum}");
         assert!(got > second, "{len}: {got} vs {second}");
+        // Rounding the crests only adds time, and stays below the S-curve.
+        let crested = bound(&program, kins, start).time;
+        assert!(
+            crested >= got && crested <= optimum,
+            "{len}: {crested} outside [{got}, {optimum}]"
+        );
     }
-    // On the shortest lines the S-curve is all there is, and the bound
-    // gets within 2·3^{1/3} / 4·2^{-1/3} = 0.909 of it.
+    // On the shortest lines the S-curve is all there is, and the ramps
+    // alone get within 2·3^{1/3} / 4·2^{-1/3} = 0.909 of it.
     let len = 0.05;
-    let got = bound(&format!("G1 X{} F6000\nM2\n", 10.0 + len), kins, start).time;
+    let program = format!("G1 X{} F6000\nM2\n", 10.0 + len);
+    let got = bound_with(&program, kins, start, ramps).time;
     let optimum = s_curve(len, feed, a, j);
-    assert!(got / optimum > 0.905, "{got} vs {optimum}");
+    assert!(
+        got / optimum > 0.905 && got / optimum < 0.91,
+        "{got} vs {optimum}"
+    );
     assert!(trapezoid(len, feed, a) / optimum < 0.5);
+}
+
+/// ∫ f(s) ds over [a, b] by Simpson's rule on `n` (even) intervals.
+fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
+    let h = (b - a) / n as f64;
+    let inner: f64 = (1..n)
+        .map(|i| f(a + h * i as f64) * if i % 2 == 1 { 4.0 } else { 2.0 })
+        .sum();
+    (f(a) + f(b) + inner) * h / 3.0
+}
+
+#[test]
+fn the_crests_of_a_short_line_are_rounded_as_v_cubed_bends_at_most_three_times_the_jerk() {
+    // From rest to rest on a line too short to reach the acceleration
+    // limit, the ramps let v^{3/2} grow by 1.5·√(2J)·s: f = v³ = 4.5·J·s²
+    // from each end. Every trajectory has f″ = 3·s⃛ + 3·u²/v ≥ −3·J, so
+    // the fastest has f = P − 1.5·J·(s − L/2)² in the middle, tangent to
+    // the ramps: 9·J·s₁ = 3·J·(L/2 − s₁) at s₁ = L/8, P = (18/64)·J·L².
+    // Its time is 2·(3·(s₁)^{1/3}/(4.5·J)^{1/3} + ∫ over the parabola):
+    // 0.980 of the S-curve's 4·(L/2J)^{1/3} on every length, against the
+    // ramps' 0.909.
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let (a, j) = (1500.0_f64, 75_000.0_f64);
+    let fine = BoundConfig {
+        ds: 1e-4,
+        ..BoundConfig::default()
+    };
+    for len in [0.01_f64, 0.02, 0.05] {
+        // Below the knee a²/(2J) = 15 mm/s all the way: the ramps meet at
+        // (4.5·J·(L/2)²)^{1/3}.
+        assert!((4.5 * j * (len / 2.0).powi(2)).cbrt() < a * a / (2.0 * j));
+        let s1 = len / 8.0;
+        let peak = 18.0 / 64.0 * j * len * len;
+        let ramp = 3.0 * s1.cbrt() / (4.5 * j).cbrt();
+        let crest = simpson(
+            |w| (peak - 1.5 * j * w * w).powf(-1.0 / 3.0),
+            0.0,
+            len / 2.0 - s1,
+            2000,
+        );
+        let want = 2.0 * (ramp + crest);
+        let program = format!("G1 X{} F6000\nM2\n", 10.0 + len);
+        let got = bound_with(&program, kins, start, fine).time;
+        assert!((got / want - 1.0).abs() < 1e-3, "{len}: {got} vs {want}");
+        let optimum = s_curve(len, 100.0, a, j);
+        assert!(
+            got < optimum && got / optimum > 0.975,
+            "{len}: {got} vs {optimum}"
+        );
+        // The peak speed is the parabola's.
+        let top = bound_with(&program, kins, start, fine)
+            .v
+            .iter()
+            .fold(0.0_f64, |m, v| m.max(*v));
+        assert!(
+            top <= peak.cbrt() * (1.0 + 1e-9),
+            "{len}: {top} vs {}",
+            peak.cbrt()
+        );
+    }
+}
+
+#[test]
+fn rounded_crests_stay_below_the_s_curve_on_every_line() {
+    // From rest to rest at several feeds and lengths, short of the
+    // acceleration limit and past it, short of the feed and cruising:
+    // the bound with its crests rounded is never above the S-curve
+    // optimum, and never below the bound without them.
+    let machine = mill3();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let (a, j) = (1500.0_f64, 75_000.0_f64);
+    let ramps = BoundConfig {
+        crests: false,
+        ..BoundConfig::default()
+    };
+    for feed in [10.0_f64, 40.0, 100.0] {
+        for len in [0.003_f64, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0] {
+            let program = format!("G1 X{} F{}\nM2\n", 10.0 + len, feed * 60.0);
+            let got = bound(&program, kins, start).time;
+            let before = bound_with(&program, kins, start, ramps).time;
+            let optimum = s_curve(len, feed, a, j);
+            eprintln!("F{feed} {len}: {got} ({before}) vs {optimum}");
+            assert!(got <= optimum, "F{feed} {len}: {got} above {optimum}");
+            assert!(got >= before, "F{feed} {len}: {got} below {before}");
+        }
+    }
 }
 
 #[test]
@@ -410,8 +516,11 @@ fn the_tangential_jerk_binds_a_ramp_from_rest_onto_a_curve() {
         100.0 + s,
         -c
     );
+    // The ramps alone: rounding the crest into the cruise would add to
+    // it (`crests`).
     let fine = BoundConfig {
         ds: 1e-4,
+        crests: false,
         ..BoundConfig::default()
     };
     let len = 2.0 * phi * r;
