@@ -92,6 +92,12 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         by_length.flattened,
         continuous,
     );
+    for &(first, last, nodes) in found.stranded.iter().take(20) {
+        println!(
+            "  stranded: {nodes} nodes from segment {first} (line {}) to {last} (line {})",
+            segments[first].line, segments[last].line
+        );
+    }
 }
 
 /// Median, 99th percentile and largest wall time of a `Follower` tick

@@ -323,6 +323,10 @@ pub struct Schedule {
     /// stands still and makes `time` infinite).
     pub solves: usize,
     pub failed: usize,
+    /// Stretches with no solution, which stand still: the segments (their
+    /// indices in the schedule's input) of each one's first and last
+    /// node, and its nodes.
+    pub stranded: Vec<(usize, usize, usize)>,
     nodes: Vec<Node>,
 }
 
@@ -771,6 +775,13 @@ impl Sampler {
             if stretch.iter().any(|node| node.xmax > 0.0) {
                 out.stretches += 1;
                 let x = self.stretch(stretch, &mut out);
+                if x.iter().all(|&x| x <= 0.0) {
+                    out.stranded.push((
+                        stretch[0].segment,
+                        stretch[stretch.len() - 1].segment,
+                        stretch.len(),
+                    ));
+                }
                 for (m, &x) in x.iter().enumerate() {
                     out.v[start + m] = x.max(0.0).sqrt();
                 }
@@ -1804,6 +1815,7 @@ impl Schedule {
             window_rests: 0,
             solves: 0,
             failed: 0,
+            stranded: Vec::new(),
             nodes: Vec::new(),
         }
     }
