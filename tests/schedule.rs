@@ -565,9 +565,19 @@ fn a_schedule_solved_as_the_segments_arrive_is_the_whole_programs() {
         "{early} of {} intervals before the last segment",
         expected.len()
     );
-    let (windows, failed, rests) = stream.counts();
+    let counts = stream.counts();
     assert_eq!(
-        (windows, failed, rests),
-        (whole.windows, whole.failed, whole.window_rests)
+        (
+            counts.windows,
+            counts.failed,
+            counts.window_rests,
+            counts.stranded
+        ),
+        (
+            whole.windows,
+            whole.failed,
+            whole.window_rests,
+            whole.stranded.len()
+        )
     );
 }

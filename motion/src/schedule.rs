@@ -437,6 +437,19 @@ pub struct ScheduleStream {
     counts: Schedule,
 }
 
+/// What a [`ScheduleStream`]'s solves came to ([`ScheduleStream::counts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StreamCounts {
+    /// Windows solved.
+    pub windows: usize,
+    /// Linear programs given up (their windows keeping an earlier pass).
+    pub failed: usize,
+    /// Windows that found nothing and followed the one before to rest.
+    pub window_rests: usize,
+    /// Stretches solved whole that found nothing and stand still.
+    pub stranded: usize,
+}
+
 impl ScheduleStream {
     /// A stream for `kins` (its axes' limits) under `config`, solved in
     /// windows of `window`.
@@ -485,15 +498,15 @@ impl ScheduleStream {
         self.advance(true, out);
     }
 
-    /// Windows solved, linear programs given up (their windows keeping an
-    /// earlier pass), and windows that found nothing and followed the one
-    /// before to rest.
-    pub fn counts(&self) -> (usize, usize, usize) {
-        (
-            self.counts.windows,
-            self.counts.failed,
-            self.counts.window_rests,
-        )
+    /// What the stream's solves came to so far, as [`Schedule`] counts
+    /// them.
+    pub fn counts(&self) -> StreamCounts {
+        StreamCounts {
+            windows: self.counts.windows,
+            failed: self.counts.failed,
+            window_rests: self.counts.window_rests,
+            stranded: self.counts.stranded.len(),
+        }
     }
 
     fn advance(&mut self, finished: bool, out: &mut impl FnMut(Interval)) {
@@ -562,7 +575,14 @@ impl ScheduleStream {
                         let x = self
                             .sampler
                             .passes(span, Start::Rest, guess, &mut self.counts)
-                            .unwrap_or_else(|| vec![0.0; m]);
+                            .unwrap_or_else(|| {
+                                self.counts.stranded.push((
+                                    span[0].segment,
+                                    span[m - 1].segment,
+                                    m,
+                                ));
+                                vec![0.0; m]
+                            });
                         for (k, &x) in x.iter().enumerate() {
                             self.x[start + k] = as_speed_squared(x);
                         }
@@ -581,7 +601,10 @@ impl ScheduleStream {
             }
             let windows = self.windows.as_mut().expect("set above");
             let step = windows.next(&self.sampler, span, complete, self.window, &mut self.counts);
-            for (k, &x) in windows.x[..windows.committed].iter().enumerate() {
+            // Only what this window committed: the nodes before `known`
+            // are final and already copied.
+            let from = self.known.saturating_sub(start).min(windows.committed);
+            for (k, &x) in windows.x[..windows.committed].iter().enumerate().skip(from) {
                 self.x[start + k] = as_speed_squared(x);
             }
             self.known = start + windows.committed;
@@ -1737,8 +1760,12 @@ fn interval_piece(nodes: &[Node], x: &[f64], k: usize) -> (Piece, bool) {
 
 /// Interval `k` as a [`Follower`] runs it. Reads x at nodes k − 1 … k + 2.
 fn interval(nodes: &[Node], x: &[f64], k: usize) -> Interval {
+    interval_of(nodes, k, interval_piece(nodes, x, k).0)
+}
+
+/// Interval `k` (from node k to k + 1) run at `piece`.
+fn interval_of(nodes: &[Node], k: usize, piece: Piece) -> Interval {
     let length = nodes[k].h;
-    let (piece, _) = interval_piece(nodes, x, k);
     let end = &nodes[k + 1];
     Interval {
         segment: end.segment,
@@ -1918,8 +1945,12 @@ impl Schedule {
         let mut run = 0;
         if between == Interpolant::SpeedInLength {
             // Followed as the executor would: a `Follower` over the
-            // intervals.
-            let intervals = self.intervals();
+            // intervals, as `intervals` lists them.
+            let pieces = &profile.as_ref().expect("made by length").pieces;
+            let intervals: Vec<Interval> = (0..n.saturating_sub(1))
+                .filter(|&k| nodes[k].h > 0.0)
+                .map(|k| interval_of(nodes, k, pieces[k]))
+                .collect();
             if intervals.iter().any(|i| !i.duration.is_finite()) {
                 // A stretch that stands still: no motion to sample.
                 out.time = f64::INFINITY;
