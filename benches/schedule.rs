@@ -55,6 +55,14 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
     };
     let found = schedule(&segments, kins, config).expect("mill3 has trivial kinematics");
     let wall = t0.elapsed().as_secs_f64();
+    // Before the slow measures below, so that a long run that fails in
+    // them has said this much.
+    for &(first, last, nodes) in found.stranded.iter().take(20) {
+        eprintln!(
+            "{name}: stranded: {nodes} nodes from segment {first} (line {}) to {last} (line {})",
+            segments[first].line, segments[last].line
+        );
+    }
     let used = found.limit_use(kins).expect("mill3 has trivial kinematics");
     let time = found.scaled_time(&used);
     let follow = |between| {
@@ -92,18 +100,17 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         by_length.flattened,
         continuous,
     );
-    for &(first, last, nodes) in found.stranded.iter().take(20) {
-        println!(
-            "  stranded: {nodes} nodes from segment {first} (line {}) to {last} (line {})",
-            segments[first].line, segments[last].line
-        );
-    }
 }
 
 /// Median, 99th percentile and largest wall time of a `Follower` tick
 /// over `intervals` at `period`, µs, as a table cell.
 fn follower_tick_cost(intervals: &[Interval], period: f64) -> String {
     let motion: f64 = intervals.iter().map(|i| i.duration).sum();
+    if !motion.is_finite() {
+        // A stretch that stands still: the follower would wait there for
+        // ever (and the loop below with it).
+        return "-".into();
+    }
     let mut times: Vec<f64> = Vec::with_capacity((motion / period) as usize + 2);
     let mut follower = Follower::new(period);
     let mut queue = intervals.iter().copied();
