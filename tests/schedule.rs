@@ -460,6 +460,74 @@ fn stellabee_excerpt() -> (String, Position) {
     )
 }
 
+/// A stretch of stellabee1.ngc (lines 8677–8689 of the file, between
+/// two of the planner's stops) whose tight blends the jerk holds below
+/// 1 mm/s, the speed the schedule keeps away from stops: with that floor
+/// every linear program of the stretch had no solution and it stood
+/// still (as did some 300 stretches of the file). The floor is lowered
+/// where nothing else is found, and the motion keeps every limit on its
+/// samples. (The same lines planned on their own, from rest, are solved
+/// with the floor: the blends the planner makes there differ.)
+#[test]
+fn a_stretch_held_below_the_kept_speed_still_moves() {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/conformance/linuxcnc-programs/tp-stress/performance/stellabee1.ngc"
+    );
+    let Ok(text) = std::fs::read_to_string(path) else {
+        eprintln!("stellabee1.ngc not under ../shared; skipped");
+        return;
+    };
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    // As the benchmarks run it: shifted into mill3's travel.
+    let head: Vec<&str> = text.lines().take(8700).collect();
+    let program = format!(
+        "G21 G10 L2 P1 X100 Y50 Z-20\nG54\n{}\nM2\n",
+        head.join("\n")
+    );
+    let segments = planned(&program, kins, Position::ZERO);
+    // The stretch from the stop at the end of file line 8676 to the one
+    // at the end of 8689 (two lines more in the program).
+    let first = segments
+        .iter()
+        .position(|s| s.line == 8679)
+        .expect("line 8677 planned");
+    let last = segments
+        .iter()
+        .rposition(|s| s.line == 8691)
+        .expect("line 8689 planned");
+    assert_eq!(segments[first - 1].exit_velocity, 0.0, "a stop before");
+    assert_eq!(segments[last].exit_velocity, 0.0, "a stop after");
+    let part = &segments[first..=last];
+    let schedule = schedule(part, kins, config()).unwrap();
+    assert!(
+        schedule.stranded.is_empty(),
+        "stood still: {:?}",
+        schedule.stranded
+    );
+    // The programs with the usual floor were given up on.
+    assert!(
+        schedule.time.is_finite() && schedule.failed > 0,
+        "{}",
+        schedule.failed
+    );
+    let followed = schedule
+        .sampled(part, kins, 0.001, Interpolant::SpeedInLength)
+        .unwrap();
+    let on_samples = followed.limits;
+    assert!(
+        on_samples.velocity <= 1.0 + SOLVER_TOLERANCE
+            && on_samples.acceleration <= 1.0 + SOLVER_TOLERANCE
+            && on_samples.jerk <= 1.0 + SOLVER_TOLERANCE,
+        "{on_samples:?}"
+    );
+    assert!(
+        (followed.time / schedule.time - 1.0).abs() < 0.01,
+        "{followed:?}"
+    );
+}
+
 /// Followed by its speed as a function of arc length, the motion the
 /// schedule's rows judge between nodes, a schedule through corners, an
 /// arc and a dense curve, and one through a dense CAM profile, keeps

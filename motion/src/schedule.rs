@@ -91,6 +91,10 @@ const REST_NODES: usize = 8;
 /// than [`REST_NODES`] from a stop, where the caps allow it.
 const MOVING_X: f64 = 1.0;
 
+/// Where no linear program of a stretch can be solved with
+/// [`MOVING_X`], it is tried with this share of it, then with none.
+const LOWER_FLOOR: f64 = 0.01;
+
 /// Share of its bound by which a row across a window's seam may exceed
 /// it (see `Rows::push`): the tolerance on limit use, 1e-6.
 const SEAM_ROOM: f64 = 1e-8;
@@ -901,15 +905,35 @@ impl Sampler {
         let mut best: Option<(Vec<f64>, f64)> = None;
         let mut retries = 0;
         let mut pass = 0;
+        let first = guess.clone();
+        let mut moving = MOVING_X;
         while pass < self.config.passes {
             out.solves += 1;
-            let Some(x) = self.linear_program(nodes, &guess, from) else {
+            let Some(x) = self.linear_program(nodes, &guess, from, moving) else {
                 out.failed += 1;
                 // The solver gave up (numerically): from a lower guess,
                 // whose tangents are steeper, while nothing was found;
                 // else keep the best found.
-                if best.is_some() || retries == RETRIES {
+                if best.is_some() {
                     break;
+                }
+                if retries == RETRIES {
+                    // Nothing from any guess. The speed kept away from
+                    // the stops may be more than the path allows there:
+                    // stellabee1.ngc has some 300 stretches whose tight
+                    // blends the jerk holds below 1 mm/s. Lower it, down
+                    // to none.
+                    if moving == 0.0 {
+                        break;
+                    }
+                    moving = if moving > MOVING_X * LOWER_FLOOR {
+                        MOVING_X * LOWER_FLOOR
+                    } else {
+                        0.0
+                    };
+                    retries = 0;
+                    guess.copy_from_slice(&first);
+                    continue;
                 }
                 retries += 1;
                 for x in guess.iter_mut() {
@@ -963,7 +987,13 @@ impl Sampler {
     /// One linear program: the velocity, acceleration and (linearised
     /// about `guess`) jerk limits, the cycle time's first-order change
     /// about `guess` as objective. `None` when the solver gives up.
-    fn linear_program(&self, nodes: &[Node], guess: &[f64], from: Start) -> Option<Vec<f64>> {
+    fn linear_program(
+        &self,
+        nodes: &[Node],
+        guess: &[f64],
+        from: Start,
+        moving: f64,
+    ) -> Option<Vec<f64>> {
         let m = nodes.len();
         let (a_max, j_max) = (&self.limits.a, &self.limits.j);
         // The stops are at rest: held at zero rather than bounded both
@@ -1074,8 +1104,8 @@ impl Sampler {
             // rows (√x times the rest) say nothing, and the solutions
             // then all but stopped and started again at full acceleration
             // between two nodes, which the motion between them cannot do.
-            if k > REST_NODES && k + 1 + REST_NODES < m {
-                let least = MOVING_X.min(0.5 * nodes[k].xmax.min(nodes[k + 1].xmax));
+            if moving > 0.0 && k > REST_NODES && k + 1 + REST_NODES < m {
+                let least = moving.min(0.5 * nodes[k].xmax.min(nodes[k + 1].xmax));
                 for form in points.start_and_middle() {
                     let terms: [(usize, f64); 4] = std::array::from_fn(|o| (base + o, -form[o]));
                     rows.push(&terms, -least);
