@@ -39,7 +39,9 @@
 //! otherwise a node dropped to rest frees its own jerk constraint (√x
 //! times anything is 0), a gap in the discretisation that no real motion
 //! has. (Before the motion between nodes was judged, the tangent was also
-//! taken at each node's neighbours to the same end.)
+//! taken at each node's neighbours to the same end.) Where the path's jerk
+//! holds a stretch below that speed, no program of it has a solution; it
+//! is then solved with [`LOWER_FLOOR`] of it, and then with none.
 //!
 //! Stops split the path into stretches solved one by one: exact stops,
 //! unblended corners, markers that stand still, program end. At junctions
