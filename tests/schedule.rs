@@ -1,6 +1,9 @@
 //! The jerk-limited schedule (`kerf_motion::schedule`) against the closed
 //! form of the S-curve and against the lower bound it sits above.
 
+#[path = "../benches/programs.rs"]
+mod programs;
+
 use kerf_interp::{Interpreter, Position};
 use kerf_motion::bound::{lower_bound, BoundConfig};
 use kerf_motion::offline::plan_program;
@@ -470,22 +473,16 @@ fn stellabee_excerpt() -> (String, Position) {
 /// with the floor: the blends the planner makes there differ.)
 #[test]
 fn a_stretch_held_below_the_kept_speed_still_moves() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/conformance/linuxcnc-programs/tp-stress/performance/stellabee1.ngc"
-    );
-    let Ok(text) = std::fs::read_to_string(path) else {
+    // As the benchmarks run it: shifted into mill3's travel (two lines
+    // before the file's).
+    let Some(text) = programs::stellabee() else {
         eprintln!("stellabee1.ngc not under ../shared; skipped");
         return;
     };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    // As the benchmarks run it: shifted into mill3's travel.
-    let head: Vec<&str> = text.lines().take(8700).collect();
-    let program = format!(
-        "G21 G10 L2 P1 X100 Y50 Z-20\nG54\n{}\nM2\n",
-        head.join("\n")
-    );
+    let head: Vec<&str> = text.lines().take(8702).collect();
+    let program = head.join("\n") + "\nM2\n";
     let segments = planned(&program, kins, Position::ZERO);
     // The stretch from the stop at the end of file line 8676 to the one
     // at the end of 8689 (two lines more in the program).

@@ -273,6 +273,27 @@ impl Tangential {
         bend: 0.0,
         lift: 0.0,
     };
+
+    /// Ĵ⁺ ≥ s⃛ at speed `v` with |dv/dt| ≤ `u`, mm/s³ (infinite where
+    /// nothing bounds it).
+    fn above(&self, v: f64, u: f64) -> f64 {
+        finite_or_infinite(self.base + self.coupling * v * u + self.bend * v * v * v)
+    }
+
+    /// Ĵ⁻ ≥ −s⃛ at speed `v` with |dv/dt| ≤ `u`, mm/s³ (infinite where
+    /// nothing bounds it).
+    fn below(&self, v: f64, u: f64) -> f64 {
+        finite_or_infinite(self.base + self.coupling * v * u + self.lift * v * v * v)
+    }
+}
+
+/// `j`, or infinity where it is not finite (NaN from infinite terms).
+fn finite_or_infinite(j: f64) -> f64 {
+    if j.is_finite() {
+        j
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// A sampled point of the path.
@@ -875,28 +896,24 @@ impl<'k> TimeBound<'k> {
         let g = |k: usize| &self.geometry[2 * m * k..2 * m * (k + 1)];
         // Ĵ⁻ at each node; infinite where nothing bounds s⃛.
         let floor: Vec<f64> = (0..n)
-            .map(|k| {
-                let t = &self.tangential[k];
-                let vk = v[k];
-                let u = self.u_bound(g(k), x[k]);
-                let j = t.base + t.coupling * vk * u + t.lift * vk * vk * vk;
-                if j.is_finite() {
-                    j
-                } else {
-                    f64::INFINITY
-                }
-            })
+            .map(|k| self.tangential[k].below(v[k], self.u_bound(g(k), x[k])))
             .collect();
         let mut piece: Vec<CrestPoint> = Vec::new();
         let mut hull: Vec<usize> = Vec::new();
-        let first = |k: usize, v: &[f64]| CrestPoint {
-            s: 0.0,
-            f: v[k].powi(3),
-            phi: 0.0,
-            step: k,
-            nodes: (k, k),
-        };
-        piece.push(first(0, v));
+        // Round what the piece holds and start the next at node `k`.
+        let mut restart =
+            |piece: &mut Vec<CrestPoint>, k: usize, v: &mut [f64], step: &mut [f64]| {
+                round_piece(piece, &mut hull, v, step);
+                piece.clear();
+                piece.push(CrestPoint {
+                    s: 0.0,
+                    f: v[k].powi(3),
+                    phi: 0.0,
+                    step: k,
+                    nodes: Some((k, k)),
+                });
+            };
+        restart(&mut piece, 0, v, step);
         let mut slope = 0.0;
         for k in 0..n - 1 {
             let ds = nodes[k].ds;
@@ -904,16 +921,14 @@ impl<'k> TimeBound<'k> {
                 // A junction: node k + 1 is the same point as node k.
                 let p = piece.last_mut().expect("a piece has its first point");
                 p.f = p.f.min(v[k + 1].powi(3));
-                p.nodes.1 = k + 1;
+                p.nodes = p.nodes.map(|(first, _)| (first, k + 1));
                 continue;
             }
             let j = floor[k].max(floor[k + 1]);
             if !j.is_finite() {
                 // Nothing bounds s⃛ on this step: the pieces either side
                 // are rounded apart, the step left as it is.
-                round_piece(&mut piece, &mut hull, v, step);
-                piece.clear();
-                piece.push(first(k + 1, v));
+                restart(&mut piece, k + 1, v, step);
                 slope = 0.0;
                 continue;
             }
@@ -927,7 +942,7 @@ impl<'k> TimeBound<'k> {
                     f,
                     phi,
                     step: k,
-                    nodes: node.map_or((usize::MAX, 0), |i| (i, i)),
+                    nodes: node.map(|i| (i, i)),
                 });
             };
             if nodes[k].line {
@@ -949,9 +964,7 @@ impl<'k> TimeBound<'k> {
             }
             if x[k + 1] <= 0.0 {
                 // At rest f = 0 whatever came before: a new piece.
-                round_piece(&mut piece, &mut hull, v, step);
-                piece.clear();
-                piece.push(first(k + 1, v));
+                restart(&mut piece, k + 1, v, step);
                 slope = 0.0;
             }
         }
@@ -978,8 +991,7 @@ impl<'k> TimeBound<'k> {
             let v = x[k].max(0.0).sqrt();
             let u = self.u_bound(g(k), x[k]);
             let t = &self.tangential[k];
-            let j = t.base + t.coupling * v * u + t.bend * v * v * v;
-            own.push(if j.is_finite() { j } else { f64::INFINITY });
+            own.push(t.above(v, u));
             reach.push(v * u);
         }
         // The window: u builds up from 0 (behind) or falls back to 0
@@ -1195,9 +1207,9 @@ struct CrestPoint {
     phi: f64,
     /// The step whose time the way into this point belongs to.
     step: usize,
-    /// The nodes at this point (first, last), empty (first > last) for a
-    /// point inside a line.
-    nodes: (usize, usize),
+    /// The nodes at this point (first, last; more than one at a
+    /// junction), none for a point inside a line.
+    nodes: Option<(usize, usize)>,
 }
 
 /// Lower the points of `piece` to the lower convex hull of f + Φ, write
@@ -1251,9 +1263,10 @@ fn round_piece(piece: &mut [CrestPoint], hull: &mut Vec<usize>, v: &mut [f64], s
             }
         }
         before = old;
-        let (lo, hi) = piece[i].nodes;
-        for speed in v.iter_mut().take(hi + 1).skip(lo) {
-            *speed = speed.min(f.cbrt());
+        if let Some((first, last)) = piece[i].nodes {
+            for speed in &mut v[first..=last] {
+                *speed = speed.min(f.cbrt());
+            }
         }
     }
 }

@@ -577,18 +577,7 @@ impl ScheduleStream {
                     // Short enough to solve whole, as `schedule` does.
                     if span.iter().any(|node| node.xmax > 0.0) {
                         self.counts.stretches += 1;
-                        let guess = self.sampler.first_guess(span, Start::Rest, None);
-                        let x = self
-                            .sampler
-                            .passes(span, Start::Rest, guess, &mut self.counts)
-                            .unwrap_or_else(|| {
-                                self.counts.stranded.push((
-                                    span[0].segment,
-                                    span[m - 1].segment,
-                                    m,
-                                ));
-                                vec![0.0; m]
-                            });
+                        let x = self.sampler.whole(span, &mut self.counts);
                         for (k, &x) in x.iter().enumerate() {
                             self.x[start + k] = as_speed_squared(x);
                         }
@@ -804,13 +793,6 @@ impl Sampler {
             if stretch.iter().any(|node| node.xmax > 0.0) {
                 out.stretches += 1;
                 let x = self.stretch(stretch, &mut out);
-                if x.iter().all(|&x| x <= 0.0) {
-                    out.stranded.push((
-                        stretch[0].segment,
-                        stretch[stretch.len() - 1].segment,
-                        stretch.len(),
-                    ));
-                }
                 for (m, &x) in x.iter().enumerate() {
                     out.v[start + m] = x.max(0.0).sqrt();
                 }
@@ -834,12 +816,21 @@ impl Sampler {
     fn stretch(&self, nodes: &[Node], out: &mut Schedule) -> Vec<f64> {
         match self.config.window {
             Some(window) if nodes.len() > window.horizon + 1 => self.windowed(nodes, window, out),
-            _ => {
-                let guess = self.first_guess(nodes, Start::Rest, None);
-                self.passes(nodes, Start::Rest, guess, out)
-                    .unwrap_or_else(|| vec![0.0; nodes.len()])
-            }
+            _ => self.whole(nodes, out),
         }
+    }
+
+    /// x at every node of one stretch (from rest to rest) solved whole; a
+    /// stretch with no solution stands still, and `out.stranded` lists it.
+    fn whole(&self, nodes: &[Node], out: &mut Schedule) -> Vec<f64> {
+        let guess = self.first_guess(nodes, Start::Rest, None);
+        self.passes(nodes, Start::Rest, guess, out)
+            .unwrap_or_else(|| {
+                let m = nodes.len();
+                out.stranded
+                    .push((nodes[0].segment, nodes[m - 1].segment, m));
+                vec![0.0; m]
+            })
     }
 
     /// One stretch window by window (see [`Window`]).
