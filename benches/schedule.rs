@@ -17,6 +17,10 @@
 //! 100 s at `2000 6 2000 500`. A fifth number N spaces each segment's
 //! nodes by its top speed, N per servo period
 //! (`ScheduleConfig::nodes_per_period`; HORIZON 0 for no windows).
+//! `--reserve R` solves with the share R of every acceleration and jerk
+//! limit kept back for feed override on the follower
+//! (`ScheduleConfig::reserve`); the limit use columns still read the
+//! machine's whole limits.
 
 #[path = "programs.rs"]
 mod programs;
@@ -132,10 +136,18 @@ fn follower_tick_cost(intervals: &[Interval], period: f64) -> String {
 }
 
 fn main() {
-    let numbers: Vec<usize> = std::env::args()
-        .skip(1)
-        .filter_map(|a| a.parse().ok())
-        .collect();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let reserve = match args.iter().position(|a| a == "--reserve") {
+        Some(k) => match args.get(k + 1).and_then(|r| r.parse::<f64>().ok()) {
+            Some(r) if (0.0..1.0).contains(&r) => r,
+            _ => {
+                eprintln!("--reserve takes a share of the limits, at least 0 and below 1");
+                std::process::exit(2);
+            }
+        },
+        None => 0.0,
+    };
+    let numbers: Vec<usize> = args.iter().filter_map(|a| a.parse().ok()).collect();
     let lines = numbers.first().copied().unwrap_or(2000);
     let passes = numbers.get(1).copied().unwrap_or(6);
     let window = match (numbers.get(2), numbers.get(3)) {
@@ -151,6 +163,7 @@ fn main() {
         passes,
         window,
         nodes_per_period,
+        reserve,
         ..ScheduleConfig::default()
     };
     let machine = kerf_machines::load("mill3").unwrap();
@@ -168,7 +181,15 @@ fn main() {
             w.horizon, w.commit
         ),
     };
-    println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}");
+    let kept = if reserve > 0.0 {
+        format!(
+            ", {:.0} % of acceleration and jerk kept for override",
+            100.0 * reserve
+        )
+    } else {
+        String::new()
+    };
+    println!("machine mill3, G64 P0.01, servo period 1 ms, schedule nodes {nodes}, {solved}{kept}");
     println!(
         "{:<30} {:>12} {:>12} {:>12} {:>7} {:>8} {:>9}  {:>5} {:>6} {:>6} {:>9} {:>6} {:>3} {:>6} {:>9}  {:>5} {:>5} {:>6} {:>6}  {:>12} {:>5} {:>5} {:>6} {:>6} {:>4} {:>6}  tick µs med/p99/max",
         "program",

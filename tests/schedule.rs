@@ -646,3 +646,199 @@ fn a_schedule_solved_as_the_segments_arrive_is_the_whole_programs() {
         )
     );
 }
+
+/// Share of the acceleration and jerk limits the override tests' schedules
+/// keep back.
+const RESERVE: f64 = 0.1;
+
+/// A feed hold on a schedule is a change of clock: on a line cruising at
+/// 20 mm/s, the follower's rate ramps from 1 to 0 in 1/slope + slope/bend
+/// seconds (the symmetric ramp of its rate limits), so the tool runs on
+/// for half that time's worth of schedule, 20 mm/s × half the ramp, and
+/// stops on the path; held, it does not creep; released, it ramps back
+/// and ends where the schedule ends, later by the time from the hold to
+/// the release (the ramps down and up each run the clock at half rate on
+/// average, and are alike).
+#[test]
+fn a_hold_on_the_schedule_stops_on_the_path_and_resumes_there() {
+    use kerf_motion::schedule::{Follower, RateLimits};
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(10.0, 10.0, -10.0);
+    let config = ScheduleConfig {
+        reserve: RESERVE,
+        ..config()
+    };
+    let (segments, found) = solved_with("G21 G90 G1 F1200 X110\nM2\n", kins, start, config);
+    let intervals = found.intervals();
+    let limits = RateLimits::for_machine(kins, RESERVE).unwrap();
+    assert!(limits.slope > 0.0 && limits.bend > 0.0, "{limits:?}");
+    let ramp = 1.0 / limits.slope + limits.slope / limits.bend;
+    let x_of = |s: &kerf_motion::schedule::Sample| segments[s.segment].shape.point(s.at)[0];
+
+    let period = 0.001;
+    let mut follower = Follower::with_override(period, limits);
+    let mut queue = intervals.iter().copied();
+    // Two seconds in: cruising at the feed.
+    let mut last = None;
+    for _ in 0..2000 {
+        last = follower.tick(&mut queue);
+    }
+    let at_hold = x_of(&last.unwrap());
+    follower.set_override(0.0);
+    let ramp_periods = (ramp / period).ceil() as u64 + 2;
+    for _ in 0..ramp_periods {
+        last = follower.tick(&mut queue);
+    }
+    let stopped = last.unwrap();
+    assert_eq!(stopped.rate, 0.0, "held after the ramp");
+    let ran_on = x_of(&stopped) - at_hold;
+    let expected = 20.0 * 0.5 * ramp;
+    eprintln!("ramp {ramp:.4} s, ran on {ran_on:.5} mm, expected {expected:.5} mm");
+    assert!(
+        (ran_on - expected).abs() < 20.0 * period,
+        "ran on {ran_on} mm after the hold, expected {expected} mm"
+    );
+    // Held: not a nanometre of creep.
+    for _ in 0..500 {
+        let held = follower.tick(&mut queue).unwrap();
+        assert_eq!((held.segment, held.at), (stopped.segment, stopped.at));
+    }
+    follower.set_override(1.0);
+    while let Some(sample) = follower.tick(&mut queue) {
+        last = Some(sample);
+    }
+    // The last sample falls in the schedule's last period, where it
+    // creeps into rest: a hair short of the end.
+    let end = x_of(&last.unwrap());
+    assert!((0.0..1e-4).contains(&(110.0 - end)), "ended at X{end}");
+    // The whole schedule's time ran, and the wall clock lost the time
+    // from the hold to the release on top of it (to a period either way).
+    let motion: f64 = intervals.iter().map(|i| i.duration).sum();
+    assert!((follower.passed_time() - motion).abs() < 1e-9 * motion);
+    let wall = follower.periods() as f64 * period;
+    let lost = wall - motion;
+    // The ramp down runs half its time's worth of schedule, the ramp up
+    // the other half: the loss is the time from the hold to the release.
+    let expected_loss = (ramp_periods + 500) as f64 * period;
+    assert!(
+        (lost - expected_loss).abs() < 2.0 * period,
+        "lost {lost:.4} s, expected {expected_loss:.4} s"
+    );
+}
+
+/// Deterministic operator: a new feed override every 20–400 periods,
+/// among holds, releases and values between, from a seeded generator,
+/// and 100 % for good after `until` periods (so the motion ends).
+fn random_operator(seed: u64, until: u64) -> impl FnMut(u64, &mut kerf_motion::schedule::Follower) {
+    let mut state = seed;
+    let mut next_change = 0;
+    move |period, follower| {
+        if period >= until {
+            follower.set_override(1.0);
+            return;
+        }
+        if period < next_change {
+            return;
+        }
+        // xorshift64*
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        let r = state.wrapping_mul(0x2545_f491_4f6c_dd1d);
+        let pick = (r >> 40) % 6;
+        let factor = match pick {
+            0 => 0.0,
+            1 => 1.0,
+            _ => ((r >> 8) & 0xffff) as f64 / 65535.0,
+        };
+        follower.set_override(factor);
+        next_change = period + 20 + (r & 0x17f) % 381;
+    }
+}
+
+/// Under an operator who turns the feed override at random, holds and
+/// releases, a schedule solved with a reserve keeps every axis within
+/// its limits on the follower's samples, as it does at 100 %: the rate
+/// ramps fit in the reserve. Ramped faster than the reserve allows
+/// (the rate limits of a reserve six times larger), the same operator
+/// breaks a limit: the reserve is what keeps them.
+#[test]
+fn feed_override_on_the_schedule_keeps_every_limit_within_the_reserve() {
+    use kerf_motion::schedule::RateLimits;
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let config = ScheduleConfig {
+        reserve: RESERVE,
+        ..config()
+    };
+    let programs = [
+        (
+            corners_arc_and_curve().replace("F3000", "F6000"),
+            Position::xyz(50.0, 50.0, -5.0),
+        ),
+        stellabee_excerpt(),
+    ];
+    let fitting = RateLimits::for_machine(kins, RESERVE).unwrap();
+    let steep = RateLimits::for_machine(kins, 6.0 * RESERVE).unwrap();
+    let mut broken = 0.0f64;
+    for (program, start) in programs {
+        let (segments, found) = solved_with(&program, kins, start, config);
+        let at_full = found
+            .sampled(&segments, kins, 0.001, Interpolant::SpeedInLength)
+            .unwrap();
+        let used = found.limit_use(kins).unwrap();
+        let until = (4.0 * found.time / 0.001) as u64;
+        let max = 100 * until + 100_000;
+        for seed in [1u64, 7, 42] {
+            let followed = found
+                .followed(
+                    &segments,
+                    kins,
+                    0.001,
+                    fitting,
+                    &mut random_operator(seed, until),
+                    max,
+                )
+                .unwrap();
+            let on_samples = followed.limits;
+            eprintln!(
+                "seed {seed}: {:.4} s at 100 %, {:.4} s overridden, {on_samples:?}",
+                at_full.time,
+                followed.periods as f64 * 0.001
+            );
+            assert!(followed.periods < max, "the motion ended");
+            assert!((followed.time - at_full.time).abs() < 1e-9 * at_full.time);
+            // Overridden, it takes longer than at 100 %.
+            assert!(followed.periods as f64 * 0.001 > at_full.time + 0.1);
+            let allowed = used.slowdown().powi(3) * (1.0 + 1e-6);
+            for (what, value) in [
+                ("velocity", on_samples.velocity),
+                ("acceleration", on_samples.acceleration),
+                ("jerk", on_samples.jerk),
+            ] {
+                assert!(
+                    value <= allowed,
+                    "seed {seed}: {what} {value} on the samples"
+                );
+            }
+            let too_steep = found
+                .followed(
+                    &segments,
+                    kins,
+                    0.001,
+                    steep,
+                    &mut random_operator(seed, until),
+                    max,
+                )
+                .unwrap()
+                .limits;
+            broken = broken.max(too_steep.acceleration).max(too_steep.jerk);
+        }
+    }
+    eprintln!("ramped too steeply: {broken:.4} of a limit");
+    assert!(
+        broken > 1.01,
+        "ramps too steep for the reserve broke no limit"
+    );
+}

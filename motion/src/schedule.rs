@@ -77,7 +77,7 @@ mod banded;
 mod follow;
 
 use banded::{BandedLp, Failure};
-pub use follow::{Follower, Interval, Sample};
+pub use follow::{Follower, Interval, RateLimits, Sample};
 
 use crate::bound::arc_third;
 use crate::kinematics::Kinematics;
@@ -192,6 +192,13 @@ pub struct ScheduleConfig {
     /// that speed travels in `period / nodes_per_period`, but never
     /// closer than `ds` (`None`: every `ds`).
     pub nodes_per_period: Option<f64>,
+    /// Share of every axis's acceleration and jerk limit the schedule
+    /// leaves unused (0 ≤ reserve < 1), so that a [`Follower`] can change
+    /// its feed override within the rest ([`RateLimits::for_machine`]).
+    /// 0: the schedule uses the whole limits and a follower runs it at
+    /// 100 % only. The velocity limits are used whole either way: an
+    /// override at or below 100 % never raises a speed.
+    pub reserve: f64,
 }
 
 /// Solving a stretch in windows, as a planner that runs ahead of the
@@ -219,6 +226,7 @@ impl Default for ScheduleConfig {
             passes: 6,
             window: None,
             nodes_per_period: None,
+            reserve: 0.0,
         }
     }
 }
@@ -233,6 +241,12 @@ pub enum ScheduleError {
          use the lower bound (kerf_motion::bound) for this machine"
     )]
     NonTrivialKinematics { joint: String },
+    /// A reserve outside 0 ≤ reserve < 1.
+    #[error(
+        "a schedule's reserve is the share of the acceleration and jerk limits kept back \
+         for feed override, at least 0 and below 1; got {0}"
+    )]
+    Reserve(f64),
 }
 
 /// Path derivatives in arc length at a node, per axis.
@@ -393,13 +407,31 @@ fn axis_limits(kins: &dyn Kinematics) -> Result<AxisLimits, ScheduleError> {
     Ok(l)
 }
 
+/// The limits the schedule's linear programs keep: the machine's, less
+/// `config.reserve` of each acceleration and jerk limit.
+fn solving_limits(
+    kins: &dyn Kinematics,
+    config: &ScheduleConfig,
+) -> Result<AxisLimits, ScheduleError> {
+    let r = config.reserve;
+    if !(0.0..1.0).contains(&r) {
+        return Err(ScheduleError::Reserve(r));
+    }
+    let mut l = axis_limits(kins)?;
+    for i in 0..9 {
+        l.a[i] *= 1.0 - r;
+        l.j[i] *= 1.0 - r;
+    }
+    Ok(l)
+}
+
 /// The schedule along `segments` (markers included, in order) on `kins`.
 pub fn schedule(
     segments: &[Segment],
     kins: &dyn Kinematics,
     config: ScheduleConfig,
 ) -> Result<Schedule, ScheduleError> {
-    let limits = axis_limits(kins)?;
+    let limits = solving_limits(kins, &config)?;
     let mut path = Sampler {
         limits,
         config,
@@ -464,7 +496,7 @@ impl ScheduleStream {
         config: ScheduleConfig,
         window: Window,
     ) -> Result<ScheduleStream, ScheduleError> {
-        let limits = axis_limits(kins)?;
+        let limits = solving_limits(kins, &config)?;
         Ok(ScheduleStream {
             sampler: Sampler {
                 limits,
@@ -1579,6 +1611,10 @@ pub struct Sampled {
     /// have dipped towards rest between the nodes, followed with constant
     /// path acceleration instead (a step of acceleration at each end).
     pub flattened: usize,
+    /// With [`Interpolant::SpeedInLength`]: servo periods the follower
+    /// ran, until it reached the end (times the period, the motion time
+    /// under the overrides of [`Schedule::followed`]).
+    pub periods: u64,
 }
 
 /// The path position `t` into an interval of duration `d` from (speed
@@ -1905,6 +1941,57 @@ impl Schedule {
         period: f64,
         between: Interpolant,
     ) -> Result<Sampled, ScheduleError> {
+        self.sample(
+            segments,
+            kins,
+            period,
+            between,
+            Follower::new(period),
+            &mut |_, _| {},
+            u64::MAX,
+        )
+    }
+
+    /// The schedule followed by length ([`Interpolant::SpeedInLength`])
+    /// under a changing feed override, sampled and measured as
+    /// [`Schedule::sampled`] does: before each period `operator` gets the
+    /// period's number (from 0) and the follower, whose override it may
+    /// set ([`Follower::set_override`]); the follower's rate moves within
+    /// `limits`. Sampling ends at the schedule's end, or after
+    /// `max_periods` (an operator that never releases a hold never ends
+    /// the motion).
+    pub fn followed(
+        &self,
+        segments: &[Segment],
+        kins: &dyn Kinematics,
+        period: f64,
+        limits: RateLimits,
+        operator: &mut dyn FnMut(u64, &mut Follower),
+        max_periods: u64,
+    ) -> Result<Sampled, ScheduleError> {
+        let follower = Follower::with_override(period, limits);
+        self.sample(
+            segments,
+            kins,
+            period,
+            Interpolant::SpeedInLength,
+            follower,
+            operator,
+            max_periods,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn sample(
+        &self,
+        segments: &[Segment],
+        kins: &dyn Kinematics,
+        period: f64,
+        between: Interpolant,
+        mut follower: Follower,
+        operator: &mut dyn FnMut(u64, &mut Follower),
+        max_periods: u64,
+    ) -> Result<Sampled, ScheduleError> {
         let limits = axis_limits(kins)?;
         let nodes = &self.nodes;
         let n = nodes.len();
@@ -1983,9 +2070,20 @@ impl Schedule {
                 .filter(|&k| nodes[k].h > 0.0)
                 .collect();
             debug_assert_eq!(node_of.len(), intervals.len());
-            let mut follower = Follower::new(period);
             let mut queue = intervals.iter().copied();
-            while let Some(sample) = follower.tick(&mut queue) {
+            loop {
+                if follower.periods() >= max_periods {
+                    // Cut off in motion (or held): no rest at the end.
+                    return Ok(Sampled {
+                        time: follower.passed_time(),
+                        periods: follower.periods(),
+                        ..out
+                    });
+                }
+                operator(follower.periods(), &mut follower);
+                let Some(sample) = follower.tick(&mut queue) else {
+                    break;
+                };
                 let k = node_of[sample.interval];
                 let in_motion = from_rest[k].min(from_rest[k + 1]) > REST_NODES;
                 run = if in_motion { run + 1 } else { 0 };
@@ -1997,6 +2095,7 @@ impl Schedule {
                 );
             }
             out.time = follower.passed_time();
+            out.periods = follower.periods();
         } else {
             // Time at the start of the interval, and of the next sample.
             let (mut begun, mut samples) = (0.0, 1u64);
