@@ -326,7 +326,11 @@ fn quality(name: &str, program: &str, kins: &dyn Kinematics, target: Option<f64>
         },
         ..PlannerConfig::default()
     };
-    let config = RunConfig { planner, record: 0 };
+    let config = RunConfig {
+        planner,
+        record: 0,
+        follow: None,
+    };
     let t0 = Instant::now();
     let report = offline::run(
         Interpreter::from_text(program, name, Position::ZERO),
@@ -412,7 +416,16 @@ fn corpus() {
             println!("{name:<32} cannot be read");
             continue;
         };
-        let report = match offline::run(a, kins, Position::ZERO, RunConfig { planner, record: 0 }) {
+        let report = match offline::run(
+            a,
+            kins,
+            Position::ZERO,
+            RunConfig {
+                planner,
+                record: 0,
+                follow: None,
+            },
+        ) {
             Ok(report) => report,
             Err(e) => {
                 println!("{name:<32} not planned: {e}");

@@ -1,5 +1,6 @@
 //! The benchmark programs, shared by `benches/motion.rs` and
-//! `tests/time_bound.rs` (included with `#[path]`), and the machine
+//! `tests/time_bound.rs` (included with `#[path]`), short test programs
+//! the schedule's tests share, and the machine
 //! LinuxCNC's sample programs run on, shared by `benches/motion.rs` and
 //! `tests/linuxcnc_programs.rs`.
 
@@ -94,4 +95,20 @@ analog_out = ["a0", "a1"]
         text += &format!("[[joints]]\nname = \"{axis}\"\naxis = \"{axis}\"\n{limits}");
     }
     text
+}
+
+/// Corners, an arc and a dense curve from (50, 50), blended and stopped
+/// (`tests/schedule.rs`, `tests/follow.rs`).
+pub fn corners_arc_and_curve() -> String {
+    let mut program =
+        String::from("G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\n");
+    for k in 1..=60 {
+        let a = k as f64 * 0.02;
+        program += &format!(
+            "X{:.5} Y{:.5}\n",
+            64.0 - 8.0 * (1.0 - a.cos()),
+            60.0 + 8.0 * a.sin()
+        );
+    }
+    program + "G61 G1 X50 Y50\nM2\n"
 }

@@ -45,7 +45,11 @@ fn row(name: &str, program: &str, kins: &dyn Kinematics, solve: ScheduleConfig) 
         run(),
         kins,
         Position::ZERO,
-        RunConfig { planner, record: 0 },
+        RunConfig {
+            planner,
+            record: 0,
+            follow: None,
+        },
     )
     .expect("benchmark programs run")
     .cycle_time;

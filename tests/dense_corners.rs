@@ -46,7 +46,11 @@ fn run(planner: PlannerConfig) -> offline::Report {
         Interpreter::from_text(STRETCH, "stretch.ngc", Position::ZERO),
         &*machine.kinematics,
         Position::ZERO,
-        RunConfig { planner, record: 0 },
+        RunConfig {
+            planner,
+            record: 0,
+            follow: None,
+        },
     )
     .unwrap()
 }

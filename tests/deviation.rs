@@ -18,6 +18,7 @@ fn run(text: &str) -> Report {
         RunConfig {
             planner: PlannerConfig::default(),
             record: 0,
+            follow: None,
         },
     )
     .unwrap()

@@ -15,7 +15,11 @@ fn limit_use(text: &str, planner: PlannerConfig) -> f64 {
         Interpreter::from_text(text, "stretch.ngc", Position::ZERO),
         &*machine.kinematics,
         Position::ZERO,
-        RunConfig { planner, record: 0 },
+        RunConfig {
+            planner,
+            record: 0,
+            follow: None,
+        },
     )
     .unwrap();
     report.max_limit_ratio()

@@ -254,6 +254,7 @@ fn run_operated(
             ..PlannerConfig::default()
         },
         record: 0,
+        follow: None,
     };
     match offline::run_operated(
         Interpreter::from_text(text, "sweep.ngc", home),

@@ -108,6 +108,7 @@ fn a_noisy_cam_polyline_becomes_a_few_lines_within_p_plus_q() {
         RunConfig {
             planner: PlannerConfig::default(),
             record: 0,
+            follow: None,
         },
     )
     .unwrap();

@@ -116,21 +116,6 @@ fn a_line_from_rest_to_rest_takes_the_s_curve_time() {
     }
 }
 
-/// Corners, an arc and a dense curve from (50, 50), blended and stopped.
-fn corners_arc_and_curve() -> String {
-    let mut program =
-        String::from("G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\n");
-    for k in 1..=60 {
-        let a = k as f64 * 0.02;
-        program += &format!(
-            "X{:.5} Y{:.5}\n",
-            64.0 - 8.0 * (1.0 - a.cos()),
-            60.0 + 8.0 * a.sin()
-        );
-    }
-    program + "G61 G1 X50 Y50\nM2\n"
-}
-
 /// The bound is a lower bound on every motion within the limits, the
 /// schedule is one such motion: corners, arcs and a dense curve, with
 /// stops and blends; and a dense CAM profile, where the bound's rounded
@@ -157,7 +142,7 @@ fn the_schedule_is_no_quicker_than_the_lower_bound() {
         schedule.time
     );
     let start = Position::xyz(50.0, 50.0, -10.0);
-    let (segments, schedule) = solved(&corners_arc_and_curve(), kins, start);
+    let (segments, schedule) = solved(&programs::corners_arc_and_curve(), kins, start);
     let bound = lower_bound(&segments, kins, BoundConfig::default()).time;
     eprintln!("schedule {:.5} s, bound {bound:.5} s", schedule.time);
     assert!(
@@ -272,7 +257,7 @@ fn windows_across_corners_keep_the_limits() {
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
     let start = Position::xyz(50.0, 50.0, -10.0);
-    let (segments, whole) = solved(&corners_arc_and_curve(), kins, start);
+    let (segments, whole) = solved(&programs::corners_arc_and_curve(), kins, start);
     let config = ScheduleConfig {
         window: Some(Window {
             horizon: 300,
@@ -538,7 +523,10 @@ fn a_schedule_followed_by_its_speed_in_arc_length_keeps_the_limits_on_its_sample
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
     let programs = [
-        (corners_arc_and_curve(), Position::xyz(50.0, 50.0, -5.0)),
+        (
+            programs::corners_arc_and_curve(),
+            Position::xyz(50.0, 50.0, -5.0),
+        ),
         stellabee_excerpt(),
     ];
     for (program, start) in programs {
@@ -585,7 +573,8 @@ fn a_schedule_solved_as_the_segments_arrive_is_the_whole_programs() {
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
     let start = Position::xyz(50.0, 50.0, -5.0);
-    let program = corners_arc_and_curve().replace("M2\n", "G1 X85 F6000\nG4 P0.2\nY56\nM2\n");
+    let program =
+        programs::corners_arc_and_curve().replace("M2\n", "G1 X85 F6000\nG4 P0.2\nY56\nM2\n");
     let segments = planned(&program, kins, start);
     let window = Window {
         horizon: 100,
@@ -774,7 +763,7 @@ fn feed_override_on_the_schedule_keeps_every_limit_within_the_reserve() {
     };
     let programs = [
         (
-            corners_arc_and_curve().replace("F3000", "F6000"),
+            programs::corners_arc_and_curve().replace("F3000", "F6000"),
             Position::xyz(50.0, 50.0, -5.0),
         ),
         stellabee_excerpt(),

@@ -444,3 +444,85 @@ fn a_schedule_is_followed_through_a_ring_without_allocating() {
     assert_eq!(got, expected);
     assert_eq!(follower.passed_time(), whole.passed_time());
 }
+
+/// The executor following a schedule (`Executor::tick_following`)
+/// allocates nothing in its tick either: taking stretches, following
+/// them under overrides and a hold, leaving one for single block, and
+/// its own profiles between them.
+#[test]
+fn the_executor_follows_a_schedule_without_allocating() {
+    use kerf_motion::exec::Intervals;
+    use kerf_motion::schedule::{RateLimits, ScheduleConfig, ScheduleStream, Window};
+    use kerf_motion::Executor;
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let start = Position::xyz(50.0, 50.0, -5.0);
+    let program = "G21 G90 G64 P0.01 G1 F3000 X60 Y52\nG3 X64 Y56 R4\nG1 X64 Y60\nG4 P0.05\nG0 X80\nG61 G1 X90 Y50\nG64 X60 Y40\nM2\n";
+    let segments = plan_program(
+        Interpreter::from_text(program, "rt.ngc", start),
+        kins,
+        start,
+        PlannerConfig::default(),
+        1,
+    )
+    .unwrap();
+    let config = ScheduleConfig {
+        ds: 0.02,
+        reserve: 0.1,
+        ..ScheduleConfig::default()
+    };
+    let window = Window {
+        horizon: 2000,
+        commit: 500,
+    };
+    let mut stream = ScheduleStream::new(kins, config, window).unwrap();
+    let mut intervals = Vec::new();
+    for segment in &segments {
+        stream.push(segment, &mut |i| intervals.push(i));
+    }
+    stream.finish(&mut |i| intervals.push(i));
+
+    let mut executor = Executor::new(start);
+    executor.follow_schedules(RateLimits::for_machine(kins, 0.1).unwrap());
+    let (mut front, mut taken) = (0, 0);
+    let mut ticks = 0u64;
+    let mut done = false;
+    COUNTING.with(|c| c.set(true));
+    while !done && ticks < 1_000_000 {
+        match ticks {
+            50 => executor.set_feed_override(0.5),
+            150 => executor.set_hold(true),
+            1500 => executor.set_hold(false),
+            1600 => executor.set_feed_override(1.0),
+            1700 => executor.set_single_block(true),
+            3500 => executor.set_single_block(false),
+            _ => {}
+        }
+        let sample = executor.tick_following(
+            0.001,
+            &segments[front..],
+            &[],
+            Intervals {
+                head: &intervals[taken..],
+                tail: &[],
+            },
+        );
+        front += sample.consumed;
+        taken += sample.intervals_consumed;
+        done = sample.stopped_at == Some(1);
+        ticks += 1;
+    }
+    COUNTING.with(|c| c.set(false));
+    assert!(done, "the program did not end in {ticks} ticks");
+    assert_eq!(
+        ALLOCATIONS.load(Ordering::Relaxed),
+        0,
+        "the executor's tick allocated while following"
+    );
+    assert!(
+        executor.stretches_followed() >= 2,
+        "{} stretches followed",
+        executor.stretches_followed()
+    );
+    assert_eq!(taken, intervals.len(), "every interval passed");
+}

@@ -365,6 +365,7 @@ fn planned_and_bound(program: &str, kins: &dyn Kinematics) -> (f64, f64) {
         RunConfig {
             planner: config(),
             record: 0,
+            follow: None,
         },
     )
     .unwrap();

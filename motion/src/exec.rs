@@ -22,7 +22,10 @@ use kerf_interp::Position;
 
 use crate::plan::{Segment, SegmentKind, SourceMoves};
 
+mod follow;
 mod guard;
+use follow::Following;
+pub use follow::Intervals;
 use guard::Guard;
 
 /// What the executor commands for one servo period.
@@ -48,6 +51,9 @@ pub struct Sample {
     /// True while the tool waits at a program stop (M0, M60, or M1 with
     /// the optional-stop switch on) for [`Executor::release_stop`].
     pub program_stop: bool,
+    /// Schedule intervals the caller removes
+    /// ([`Executor::tick_following`]; 0 from [`Executor::tick`]).
+    pub intervals_consumed: usize,
     /// True while the motion at the head of the queue waits for the
     /// operator alone: at a program stop, or at rest before a move or
     /// dwell that feed hold, single block (no `step` yet) or a 0 % feed
@@ -99,6 +105,20 @@ pub struct Executor {
     /// Periods in a row that ended at rest where the one before did (see
     /// `travel`'s snap).
     still: u32,
+    /// How fast a followed schedule's rate may change; `None`: schedules
+    /// are not followed.
+    rate_limits: Option<crate::schedule::RateLimits>,
+    /// The stretch of schedule being followed.
+    following: Option<Following>,
+    /// Segments removed from the queue since it was made or reset: the
+    /// schedule's number of the head segment.
+    passed: u64,
+    /// Stretches taken so far.
+    stretches_followed: u64,
+    /// On the first period of a stretch: the empty segments before it,
+    /// and the intervals behind it, for the caller to remove.
+    skip_on_entry: usize,
+    dropped_on_entry: usize,
 }
 
 /// Which speed caps a look ahead must meet.
@@ -716,6 +736,12 @@ impl Executor {
             guard: None,
             takeovers: 0,
             still: 0,
+            rate_limits: None,
+            following: None,
+            passed: 0,
+            stretches_followed: 0,
+            skip_on_entry: 0,
+            dropped_on_entry: 0,
         }
     }
 
@@ -833,6 +859,10 @@ impl Executor {
         self.guard = None;
         self.at_stop = false;
         self.stop_released = false;
+        self.following = None;
+        self.passed = 0;
+        self.skip_on_entry = 0;
+        self.dropped_on_entry = 0;
     }
 
     /// Periods so far in which the motion followed its guard (a checked
@@ -1179,6 +1209,19 @@ impl Executor {
     /// still queued, the current one first). The caller removes the
     /// `consumed` items of the returned sample.
     pub fn tick(&mut self, dt: f64, head: &[Segment], tail: &[Segment]) -> Sample {
+        self.tick_until(dt, head, tail, None)
+    }
+
+    /// [`Executor::tick`] that, at rest, does not start queue item
+    /// `stay_before` (a stretch of schedule starts there: the next
+    /// period takes it).
+    fn tick_until(
+        &mut self,
+        dt: f64,
+        head: &[Segment],
+        tail: &[Segment],
+        stay_before: Option<usize>,
+    ) -> Sample {
         let q = View { head, tail };
         self.period = dt;
         let mut consumed = 0;
@@ -1247,6 +1290,7 @@ impl Executor {
                     consumed += 1;
                 }
                 _ if seg.length <= 0.0 => consumed += 1,
+                _ if stay_before == Some(consumed) && self.v == 0.0 && self.a == 0.0 => break,
                 _ => {
                     self.advance(q, consumed, dt, &mut consumed);
                     moving = self.v > 0.0
@@ -1277,6 +1321,7 @@ impl Executor {
             stopped_at,
             program_stop,
             waits_on_operator,
+            intervals_consumed: 0,
         }
     }
 

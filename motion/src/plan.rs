@@ -3516,6 +3516,7 @@ mod tests {
             crate::offline::RunConfig {
                 planner: config,
                 record: 0,
+                follow: None,
             },
         )
         .unwrap();
@@ -4053,6 +4054,7 @@ mod tests {
             RunConfig {
                 planner: PlannerConfig::default(),
                 record: 0,
+                follow: None,
             },
         )
         .unwrap();

@@ -232,7 +232,7 @@ impl Default for ScheduleConfig {
 }
 
 /// Why no schedule could be made.
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum ScheduleError {
     /// A joint that is not an axis of its own: its limits would need the
     /// kinematics' Jacobian, which the schedule does not model.

@@ -158,6 +158,7 @@ pub fn plan(
             ..PlannerConfig::default()
         },
         record: if plot.is_some() { 2000 } else { 0 },
+        follow: None,
     };
     let home = machine.home();
     let report = offline::run(open_program(file, home, tool_table)?, kins, home, config)

@@ -51,6 +51,22 @@ pub struct Interval {
 }
 
 impl Interval {
+    /// The motion starts the interval at rest: the first of a stretch.
+    pub fn from_rest(&self) -> bool {
+        matches!(self.piece, Piece::Out { .. })
+    }
+
+    /// The motion ends the interval at rest: the last of a stretch.
+    pub fn to_rest(&self) -> bool {
+        matches!(self.piece, Piece::In { .. })
+    }
+
+    /// The schedule stands still here: its stretch found no motion within
+    /// the limits (`Schedule::stranded`).
+    pub fn stands_still(&self) -> bool {
+        matches!(self.piece, Piece::Still)
+    }
+
     /// Arc length into the interval `t` seconds into it, searched from
     /// `near` (an earlier position in it, or 0), mm.
     fn position(&self, t: f64, near: f64) -> f64 {
@@ -292,6 +308,21 @@ impl Follower {
         self.ramp = ramp;
         self.ramp_from = self.periods;
         self.ramp_clock = clock;
+    }
+
+    /// Starts the rate at `factor` (clamped into 0..=1) instead of 1:
+    /// for a follower set off from rest, before its first tick, where the
+    /// rate can take any value (nothing moves). Ignored after the first
+    /// tick.
+    pub fn start_at(&mut self, factor: f64) {
+        if self.periods == 0 {
+            let k = if factor.is_nan() {
+                1.0
+            } else {
+                factor.clamp(0.0, 1.0)
+            };
+            self.ramp = Ramp::steady(k);
+        }
     }
 
     /// The override the rate is moving to (or holds).
