@@ -33,13 +33,11 @@ fn planner() -> PlannerConfig {
     }
 }
 
-/// Coarse enough for the unoptimised test build: nodes two a servo
-/// period apart at each segment's top speed.
+/// Coarse enough for the unoptimised test build: nodes every 0.02 mm.
 fn follow() -> FollowConfig {
     FollowConfig {
         schedule: ScheduleConfig {
             ds: 0.02,
-            nodes_per_period: Some(2.0),
             ..FollowConfig::default().schedule
         },
         ..FollowConfig::default()

@@ -170,8 +170,19 @@ enum Cmd {
         #[arg(long, value_name = "OUT.svg")]
         plot: Option<PathBuf>,
         /// Acceleration-limited (trapezoidal) profiles instead of jerk-limited.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "follow")]
         trapezoidal: bool,
+        /// Follow a jerk-limited schedule solved alongside the planner
+        /// where one is ready, as third-order planning would (machines
+        /// whose joints are their axes; see docs/motion.md, "Following a
+        /// schedule"). Slower to plan: about a third of the motion's time.
+        #[arg(long)]
+        follow: bool,
+        /// With --follow: the share of every acceleration and jerk limit
+        /// the schedule keeps back for feed override and hold (0 to below
+        /// 1; more is a quicker hold and a slower schedule).
+        #[arg(long, value_name = "SHARE", default_value_t = 0.1, requires = "follow")]
+        reserve: f64,
         /// List the planned segments and their limits (speeds in mm/min,
         /// acceleration mm/s², jerk mm/s³) instead of running the plan.
         #[arg(long)]
@@ -497,6 +508,8 @@ fn main() -> ExitCode {
             tool_table,
             plot,
             trapezoidal,
+            follow,
+            reserve,
             segments,
             period_us,
         } => on.resolve(period_us, true).and_then(|target| {
@@ -512,6 +525,7 @@ fn main() -> ExitCode {
                     plot.as_deref(),
                     json,
                     trapezoidal,
+                    follow.then_some(reserve),
                     period,
                 )
             }

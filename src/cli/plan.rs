@@ -3,7 +3,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use kerf_motion::offline::{self, LimitUse, Report, RunConfig};
+use kerf_motion::offline::{self, FollowConfig, LimitUse, Report, RunConfig};
+use kerf_motion::schedule::ScheduleConfig;
 use kerf_motion::{Planner, PlannerConfig};
 use serde_json::json;
 
@@ -147,10 +148,29 @@ pub fn plan(
     plot: Option<&Path>,
     json_out: bool,
     trapezoidal: bool,
+    follow: Option<f64>,
     period: f64,
 ) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
+    let follow = match follow {
+        None => None,
+        Some(reserve) if (0.0..1.0).contains(&reserve) => {
+            let default = FollowConfig::default();
+            Some(FollowConfig {
+                schedule: ScheduleConfig {
+                    reserve,
+                    ..default.schedule
+                },
+                ..default
+            })
+        }
+        Some(reserve) => {
+            return Err(Failure::new(format!(
+                "--reserve {reserve}: the share of the limits kept for override is at least 0 and below 1"
+            )))
+        }
+    };
     let config = RunConfig {
         planner: PlannerConfig {
             jerk_limited: !trapezoidal,
@@ -158,7 +178,7 @@ pub fn plan(
             ..PlannerConfig::default()
         },
         record: if plot.is_some() { 2000 } else { 0 },
-        follow: None,
+        follow,
     };
     let home = machine.home();
     let report = offline::run(open_program(file, home, tool_table)?, kins, home, config)
@@ -186,6 +206,7 @@ pub fn plan(
                 "max_limit_ratio": report.max_limit_ratio(),
                 "segments": report.segments,
                 "guard_takeovers": report.guard_takeovers,
+                "stretches_followed": report.stretches_followed,
                 "axes": uses(&report.axes),
                 "joints": uses(&report.joints),
             })
@@ -236,6 +257,13 @@ fn print_report(machine: &str, period: f64, report: &Report) -> std::io::Result<
     }
     writeln!(out, "max limit use    {:.6}", report.max_limit_ratio())?;
     writeln!(out, "guard takeovers  {}", report.guard_takeovers)?;
+    if report.stretches_followed > 0 {
+        writeln!(
+            out,
+            "schedule         {} stretches followed",
+            report.stretches_followed
+        )?;
+    }
     writeln!(out)?;
     writeln!(
         out,
