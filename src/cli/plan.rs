@@ -139,6 +139,7 @@ pub fn segments(
     Ok(())
 }
 
+#[allow(clippy::too_many_arguments)]
 /// `kerf plan`: plan and execute the program on a virtual clock, print
 /// cycle time, largest path deviation and limit use, and optionally plot.
 pub fn plan(
