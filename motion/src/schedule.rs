@@ -25,7 +25,11 @@
 //! interval's ends and middle, which holds the speed between nodes to the
 //! limits too: judged at the nodes alone, by finite differences, the
 //! solutions zig-zagged from node to node and no motion through them kept
-//! the jerk limit (up to 3.7 times it at 1 ms samples). The jerk limit
+//! the jerk limit (up to 3.7 times it at 1 ms samples). Where the
+//! speed crests inside a half interval (u falls through zero), the jerk
+//! and the velocity are judged at the crest too, where the linear
+//! program's guess has it: with nodes several servo periods apart, the
+//! crests between the judged points read 1.009 of the jerk limit. The jerk limit
 //! reads |p′_i·u′ + 3·p″_i·u + p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
 //! it, and with the tangent in its place the constraint is linear and
 //! stricter than the true one. Every solution of the linear program is
@@ -164,6 +168,20 @@ fn stride(start: &Geometry, inner: &[Geometry; INNER], end: &Geometry) -> usize 
     }
     stride
 }
+
+/// A crest of the speed inside a half interval is judged where it is
+/// at least this share of the spacing of the judged points from either
+/// (`JerkPoints::crests`): nearer, x there differs from the point's by
+/// under 1 % of its rise over the spacing, and rows that close to the
+/// point's made a windowed line's linear program stall (1 in 12).
+const CREST_APART: f64 = 0.1;
+
+/// A crest whose x rises by less than this share above the half's
+/// start is not judged: the jerk there, √x·(…), exceeds the start's by
+/// half that share at most, and on a cruise at the velocity limit the
+/// speed's ripple in the solver's last digits made crests everywhere,
+/// rows so alike that a windowed line's linear program stalled.
+const CREST_RISE: f64 = 1e-7;
 
 /// Points inside an interval where the geometry is kept.
 const INNER: usize = 2 * JUDGED_PER_HALF - 1;
@@ -934,7 +952,12 @@ impl Sampler {
         let mut moving = MOVING_X;
         while pass < self.config.passes {
             out.solves += 1;
-            let Some(x) = self.linear_program(nodes, &guess, from, moving) else {
+            // Crests where the guess has them once it is a solution: the
+            // first guess's, of a profile under the acceleration limits
+            // alone, are nowhere near the solution's, and with them a
+            // window of a plain line found no solution from any guess.
+            let crests = pass > 0;
+            let Some(x) = self.linear_program(nodes, &guess, from, moving, crests) else {
                 out.failed += 1;
                 // The solver gave up (numerically): from a lower guess,
                 // whose tangents are steeper, while nothing was found;
@@ -1018,6 +1041,7 @@ impl Sampler {
         guess: &[f64],
         from: Start,
         moving: f64,
+        crests: bool,
     ) -> Option<Vec<f64>> {
         let m = nodes.len();
         let (a_max, j_max) = (&self.limits.a, &self.limits.j);
@@ -1136,7 +1160,34 @@ impl Sampler {
                     rows.push(&terms, -least);
                 }
             }
-            for point in points.points() {
+            // The speed's crests inside a half where the guess has them,
+            // held to the velocity limit there too (the nodes' caps
+            // bound it only at the nodes). Not across a window's seam:
+            // the window before judged those intervals, its crests where
+            // its guess had them, and committed nodes that may break a
+            // crest row put elsewhere, with nothing left free to mend it.
+            // Only where an interval lasts longer than a servo period
+            // at the guess's speed: the samples then see inside it, while
+            // over shorter ones they average the crest away (and at 0.01
+            // mm nodes the crests' rows made a windowed line's linear
+            // program stall).
+            let long = nodes[k].h > self.config.period * guess[k].max(guess[k + 1]).sqrt();
+            let crests = if !crests || !long || (rows.fixed.is_some() && k < 3) {
+                [None, None]
+            } else {
+                points.crests(guess, base)
+            };
+            for crest in crests.iter().flatten() {
+                let cap = self
+                    .velocity_cap(&crest.geometry, f64::INFINITY)
+                    .min(nodes[k].xmax)
+                    .min(nodes[k + 1].xmax);
+                if cap.is_finite() {
+                    let terms: [(usize, f64); 4] = std::array::from_fn(|o| (base + o, crest.x[o]));
+                    rows.push(&terms, cap);
+                }
+            }
+            for point in points.points().chain(crests.into_iter().flatten()) {
                 for i in 0..9 {
                     let g = point.geometry;
                     if !j_max[i].is_finite() || (g.t[i] == 0.0 && g.c[i] == 0.0 && g.d[i] == 0.0) {
@@ -1250,8 +1301,9 @@ fn apply(form: &[f64], x: &[f64], first: usize) -> f64 {
 /// A point of an interval where the jerk and acceleration of
 /// [`Interpolant::SpeedInLength`] are judged: its geometry, and x, u and
 /// u′ there as coefficients of x at the nodes k − 1 … k + 2 of interval k.
-struct JerkPoint<'n> {
-    geometry: &'n Geometry,
+#[derive(Clone, Copy)]
+struct JerkPoint {
+    geometry: Geometry,
     x: [f64; 4],
     u: [f64; 4],
     slope: [f64; 4],
@@ -1308,44 +1360,93 @@ impl<'n> JerkPoints<'n> {
         }
     }
 
-    fn points(&self) -> impl Iterator<Item = JerkPoint<'n>> + '_ {
-        let (here, next) = (&self.nodes[self.k], &self.nodes[self.k + 1]);
-        let stride = here.stride;
+    fn points(&self) -> impl Iterator<Item = JerkPoint> + '_ {
+        let stride = self.nodes[self.k].stride;
         (0..JUDGED)
             .filter(move |p| (p % (JUDGED_PER_HALF + 1)).is_multiple_of(stride))
             .map(move |p| {
                 let (half, q) = (p / (JUDGED_PER_HALF + 1), p % (JUDGED_PER_HALF + 1));
-                let f = q as f64 / JUDGED_PER_HALF as f64;
-                // Points along the interval, in units of 1/(2·JUDGED_PER_HALF).
-                let step = half * JUDGED_PER_HALF + q;
-                let geometry = match step {
-                    0 => &here.right,
-                    _ if step == 2 * JUDGED_PER_HALF => &next.left,
-                    _ => &here.inner[step - 1],
-                };
-                let [ua, ub] = self.ends[half];
-                let x0 = self.starts[half];
-                JerkPoint {
-                    geometry,
-                    // x = x0 + h·(ua·f + (ub − ua)·f²/2) at a share f of the
-                    // half; the ends exactly as the nodes and the middle
-                    // have them (the interval's end is node k + 1's x).
-                    x: match (half, q) {
-                        (_, 0) => x0,
-                        (0, _) if q == JUDGED_PER_HALF => self.starts[1],
-                        (_, _) if q == JUDGED_PER_HALF => [0.0, 0.0, 1.0, 0.0],
-                        _ => std::array::from_fn(|o| {
-                            x0[o] + self.h * (ua[o] * f + 0.5 * (ub[o] - ua[o]) * f * f)
-                        }),
-                    },
-                    u: match q {
-                        0 => ua,
-                        _ if q == JUDGED_PER_HALF => ub,
-                        _ => std::array::from_fn(|o| ua[o] + f * (ub[o] - ua[o])),
-                    },
-                    slope: self.halves[half],
-                }
+                self.point(half, q as f64 / JUDGED_PER_HALF as f64)
             })
+    }
+
+    /// Geometry `step`/(2·[`JUDGED_PER_HALF`]) along the interval.
+    fn geometry(&self, step: usize) -> &'n Geometry {
+        let (here, next) = (&self.nodes[self.k], &self.nodes[self.k + 1]);
+        match step {
+            0 => &here.right,
+            _ if step == 2 * JUDGED_PER_HALF => &next.left,
+            _ => &here.inner[step - 1],
+        }
+    }
+
+    /// The point a share `f` (0 ≤ f ≤ 1) into half `half`. Its geometry
+    /// is the judged points' between them, interpolated: [`stride`] keeps
+    /// it within [`GEOMETRY_STRAY`] of the path's own where the points
+    /// are thinned, and on lines it is exact.
+    fn point(&self, half: usize, f: f64) -> JerkPoint {
+        let along = (half as f64 + f) * JUDGED_PER_HALF as f64;
+        let below = (along.floor() as usize).min(2 * JUDGED_PER_HALF);
+        let w = along - below as f64;
+        let geometry = if w <= 0.0 {
+            *self.geometry(below)
+        } else {
+            let (a, b) = (self.geometry(below), self.geometry(below + 1));
+            let mix = |p: &Vec9, q: &Vec9| std::array::from_fn(|i| (1.0 - w) * p[i] + w * q[i]);
+            Geometry {
+                t: mix(&a.t, &b.t),
+                c: mix(&a.c, &b.c),
+                d: mix(&a.d, &b.d),
+            }
+        };
+        let [ua, ub] = self.ends[half];
+        let x0 = self.starts[half];
+        JerkPoint {
+            geometry,
+            // x = x0 + h·(ua·f + (ub − ua)·f²/2) at a share f of the
+            // half; the ends exactly as the nodes and the middle have
+            // them (the interval's end is node k + 1's x).
+            x: match half {
+                _ if f == 0.0 => x0,
+                0 if f == 1.0 => self.starts[1],
+                _ if f == 1.0 => [0.0, 0.0, 1.0, 0.0],
+                _ => std::array::from_fn(|o| {
+                    x0[o] + self.h * (ua[o] * f + 0.5 * (ub[o] - ua[o]) * f * f)
+                }),
+            },
+            u: if f == 0.0 {
+                ua
+            } else if f == 1.0 {
+                ub
+            } else {
+                std::array::from_fn(|o| ua[o] + f * (ub[o] - ua[o]))
+            },
+            slope: self.halves[half],
+        }
+    }
+
+    /// Where x peaks inside a half at the nodes' values `x` (from node
+    /// k − 1 on): u falls through zero there. Judged at the halves' ends
+    /// and inside points alone, a crest between them goes unseen, and
+    /// the jerk there (on a line √x·t·u′, largest where x is) exceeds
+    /// what the points show: 1.007 of the limit on stellabee1.ngc's
+    /// lines with nodes 0.05–0.08 mm apart. One point a half with a
+    /// crest inside, between the judged points either side.
+    fn crests(&self, x: &[f64], first: usize) -> [Option<JerkPoint>; 2] {
+        let stride = self.nodes[self.k].stride;
+        let [ua, um, ub] =
+            [self.ends[0][0], self.ends[0][1], self.ends[1][1]].map(|form| apply(&form, x, first));
+        let starts = self.starts.map(|form| apply(&form, x, first));
+        [(0, ua, um), (1, um, ub)].map(|(half, ua, ub)| {
+            let f = ua / (ua - ub);
+            // Its place between the judged points either side, 0 to 1.
+            let between = (f * JUDGED_PER_HALF as f64 / stride as f64).fract();
+            let apart = (CREST_APART..=1.0 - CREST_APART).contains(&between);
+            // x's rise from the half's start to the crest.
+            let rise = 0.5 * self.h * ua * f;
+            let seen = rise > CREST_RISE * starts[half];
+            (ua > 0.0 && ub < 0.0 && apart && seen).then(|| self.point(half, f))
+        })
     }
 
     /// x at the start of the interval and at its middle (the forms the
@@ -2218,8 +2319,16 @@ impl Schedule {
             // is under way at both.
             let points = JerkPoints::new(nodes, k, |i| x[i] == 0.0);
             let value = |form: &[f64; 4]| apply(form, &x, k - 1);
-            for point in points.points() {
-                let g = point.geometry;
+            let crests = points.crests(&x, k - 1);
+            for crest in crests.iter().flatten() {
+                let xp = value(&crest.x).max(0.0);
+                for i in 0..9 {
+                    let v = xp.sqrt() * crest.geometry.t[i].abs();
+                    use_.velocity = use_.velocity.max(v / limits.v[i]);
+                }
+            }
+            for point in points.points().chain(crests.into_iter().flatten()) {
+                let g = &point.geometry;
                 let (xp, u, slope) = (
                     value(&point.x).max(0.0),
                     value(&point.u),
