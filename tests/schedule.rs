@@ -357,6 +357,19 @@ fn nodes_spaced_by_speed_keep_the_limits() {
     }
 }
 
+/// The first `lines` lines of stellabee1.ngc (as the bench shifts it
+/// into mill3's travel) and M2; `None`, said on stderr, when the shared
+/// conformance material is not checked out.
+fn stellabee_head(lines: usize) -> Option<String> {
+    let Some(text) = programs::stellabee() else {
+        eprintln!("stellabee1.ngc not under ../shared; skipped");
+        return None;
+    };
+    let mut head: Vec<&str> = text.lines().take(lines).collect();
+    head.push("M2");
+    Some(head.join("\n"))
+}
+
 /// Nodes spaced by speed on the dense profile stellabee1.ngc opens with
 /// (its first 25 lines: short lines and blends, nodes 0.05–0.08 mm apart
 /// and several servo periods each where the curves hold the speed down):
@@ -365,20 +378,17 @@ fn nodes_spaced_by_speed_keep_the_limits() {
 /// motion read 1.009 of the jerk limit, and 1.0057 on its 1 ms samples.
 #[test]
 fn sparse_nodes_keep_the_jerk_where_the_speed_crests_between_them() {
-    let Some(text) = programs::stellabee() else {
-        eprintln!("stellabee1.ngc not under ../shared; skipped");
+    let Some(head) = stellabee_head(25) else {
         return;
     };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    let mut head: Vec<&str> = text.lines().take(25).collect();
-    head.push("M2");
     let spaced = ScheduleConfig {
         ds: 0.01,
         nodes_per_period: Some(2.0),
         ..config()
     };
-    let (segments, found) = solved_with(&head.join("\n"), kins, Position::ZERO, spaced);
+    let (segments, found) = solved_with(&head, kins, Position::ZERO, spaced);
     let used = found.limit_use(kins).unwrap();
     let followed = found
         .sampled(&segments, kins, 0.001, Interpolant::SpeedInLength)
@@ -404,6 +414,46 @@ fn sparse_nodes_keep_the_jerk_where_the_speed_crests_between_them() {
         assert!(value <= allowed, "{on_samples:?} on the samples");
     }
     assert!(on_samples.jerk > 0.9, "{on_samples:?}");
+}
+
+/// Nodes two a servo period apart, in windows, with a tenth of the
+/// limits kept for override, as `kerf plan --follow` may solve: on
+/// stellabee1.ngc's first 1400 lines the speed of one interval next to
+/// a stop dipped towards rest between its nodes, the follower took it at
+/// constant path acceleration, and the steps at its ends read 1.195 of
+/// the jerk limit on the samples. No interval is flattened now.
+#[test]
+fn sparse_nodes_in_windows_never_dip_towards_rest_between_nodes() {
+    let Some(head) = stellabee_head(1400) else {
+        return;
+    };
+    let machine = kerf_machines::load("mill3").unwrap();
+    let kins = &*machine.kinematics;
+    let spaced = ScheduleConfig {
+        ds: 0.01,
+        nodes_per_period: Some(2.0),
+        window: Some(Window {
+            horizon: 2000,
+            commit: 500,
+        }),
+        reserve: 0.1,
+        ..config()
+    };
+    let segments = planned(&head, kins, Position::ZERO);
+    let found = schedule(&segments, kins, spaced).unwrap();
+    let followed = found
+        .sampled(&segments, kins, 0.001, Interpolant::SpeedInLength)
+        .unwrap();
+    eprintln!(
+        "samples {:?}, flattened {}",
+        followed.limits, followed.flattened
+    );
+    assert_eq!(followed.flattened, 0);
+    let on_samples = followed.limits;
+    for value in [on_samples.acceleration, on_samples.jerk] {
+        assert!(value <= 0.9 * (1.0 + 1e-6), "{on_samples:?} on the samples");
+    }
+    assert!(on_samples.velocity <= 1.0 + 1e-6, "{on_samples:?}");
 }
 
 /// A parallel machine's joints are not modelled: refused by name, not

@@ -169,13 +169,6 @@ fn stride(start: &Geometry, inner: &[Geometry; INNER], end: &Geometry) -> usize 
     stride
 }
 
-/// A crest of the speed inside a half interval is judged where it is
-/// at least this share of the spacing of the judged points from either
-/// (`JerkPoints::crests`): nearer, x there differs from the point's by
-/// under 1 % of its rise over the spacing, and rows that close to the
-/// point's made a windowed line's linear program stall (1 in 12).
-const CREST_APART: f64 = 0.1;
-
 /// A crest whose x rises by less than this share above the half's
 /// start is not judged: the jerk there, √x·(…), exceeds the start's by
 /// half that share at most, and on a cruise at the velocity limit the
@@ -1172,7 +1165,8 @@ impl Sampler {
             // mm nodes the crests' rows made a windowed line's linear
             // program stall).
             let long = nodes[k].h > self.config.period * guess[k].max(guess[k + 1]).sqrt();
-            let crests = if !crests || !long || (rows.fixed.is_some() && k < 3) {
+            let crests_on = crests && !(rows.fixed.is_some() && k < 3);
+            let crests = if !crests_on || !long {
                 [None, None]
             } else {
                 points.crests(guess, base)
@@ -1185,6 +1179,23 @@ impl Sampler {
                 if cap.is_finite() {
                     let terms: [(usize, f64); 4] = std::array::from_fn(|o| (base + o, crest.x[o]));
                     rows.push(&terms, cap);
+                }
+            }
+            // Nor may the speed dip towards rest between the nodes: the
+            // follower would take the interval at constant path
+            // acceleration instead (`interval_piece`), a step of
+            // acceleration at either end, which broke the jerk limit
+            // (1.157 of it next to a stop, with nodes two a servo period
+            // apart). x at a valley of the guess stays above half of x
+            // at the node where the guess is slower.
+            if crests_on {
+                let end = if guess[k] <= guess[k + 1] { 1 } else { 2 };
+                for valley in points.valleys(guess, base).iter().flatten() {
+                    let terms: [(usize, f64); 4] = std::array::from_fn(|o| {
+                        let node = if o == end { 0.5 } else { 0.0 };
+                        (base + o, node - valley.x[o])
+                    });
+                    rows.push(&terms, 0.0);
                 }
             }
             for point in points.points().chain(crests.into_iter().flatten()) {
@@ -1433,20 +1444,28 @@ impl<'n> JerkPoints<'n> {
     /// lines with nodes 0.05–0.08 mm apart. One point a half with a
     /// crest inside, between the judged points either side.
     fn crests(&self, x: &[f64], first: usize) -> [Option<JerkPoint>; 2] {
-        let stride = self.nodes[self.k].stride;
-        let [ua, um, ub] =
-            [self.ends[0][0], self.ends[0][1], self.ends[1][1]].map(|form| apply(&form, x, first));
+        let [ua, um, ub] = self.turning_slopes(x, first);
         let starts = self.starts.map(|form| apply(&form, x, first));
         [(0, ua, um), (1, um, ub)].map(|(half, ua, ub)| {
             let f = ua / (ua - ub);
-            // Its place between the judged points either side, 0 to 1.
-            let between = (f * JUDGED_PER_HALF as f64 / stride as f64).fract();
-            let apart = (CREST_APART..=1.0 - CREST_APART).contains(&between);
             // x's rise from the half's start to the crest.
             let rise = 0.5 * self.h * ua * f;
-            let seen = rise > CREST_RISE * starts[half];
-            (ua > 0.0 && ub < 0.0 && apart && seen).then(|| self.point(half, f))
+            (ua > 0.0 && ub < 0.0 && rise > CREST_RISE * starts[half]).then(|| self.point(half, f))
         })
+    }
+
+    /// u at the interval's start, middle and end at the nodes' values `x`
+    /// (from node k − 1 on).
+    fn turning_slopes(&self, x: &[f64], first: usize) -> [f64; 3] {
+        [self.ends[0][0], self.ends[0][1], self.ends[1][1]].map(|form| apply(&form, x, first))
+    }
+
+    /// Where x is lowest inside each half at the nodes' values `x` (from
+    /// node k − 1 on): u rises through zero there.
+    fn valleys(&self, x: &[f64], first: usize) -> [Option<JerkPoint>; 2] {
+        let [ua, um, ub] = self.turning_slopes(x, first);
+        [(0, ua, um), (1, um, ub)]
+            .map(|(half, ua, ub)| (ua < 0.0 && ub > 0.0).then(|| self.point(half, ua / (ua - ub))))
     }
 
     /// x at the start of the interval and at its middle (the forms the
