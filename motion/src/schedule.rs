@@ -359,6 +359,9 @@ pub struct Schedule {
     /// node, and its nodes.
     pub stranded: Vec<(usize, usize, usize)>,
     nodes: Vec<Node>,
+    /// Servo period it was solved for, s: crests are judged on intervals
+    /// that last longer.
+    period: f64,
 }
 
 /// Largest use of each kind of limit over every axis, as fractions of the
@@ -526,7 +529,7 @@ impl ScheduleStream {
             stretch: 0,
             windows: None,
             next: 0,
-            counts: Schedule::empty(0.0),
+            counts: Schedule::empty(0.0, config.period),
         })
     }
 
@@ -818,7 +821,7 @@ impl Sampler {
 
     fn solve(mut self) -> Schedule {
         let n = self.nodes.len();
-        let mut out = Schedule::empty(self.dwell);
+        let mut out = Schedule::empty(self.dwell, self.config.period);
         out.s.reserve(n);
         out.v = vec![0.0; n];
         out.step = vec![0.0; n];
@@ -2009,8 +2012,9 @@ impl Piece {
 
 impl Schedule {
     /// No motion yet, `dwell` seconds of dwells.
-    fn empty(dwell: f64) -> Schedule {
+    fn empty(dwell: f64, period: f64) -> Schedule {
         Schedule {
+            period,
             time: dwell,
             dwell,
             s: Vec::new(),
@@ -2300,11 +2304,13 @@ impl Schedule {
         Ok(worst)
     }
 
-    /// Largest axis velocity, acceleration and jerk use: velocity at the
-    /// nodes; acceleration and jerk at the ends and middle of every
-    /// interval in motion at both ends, as [`Interpolant::SpeedInLength`]
-    /// moves through it, with the exact speed √x where the linear programs
-    /// used its tangent. On the intervals out of a stop and into one, the
+    /// Largest axis velocity, acceleration and jerk use where the linear
+    /// programs judge them: velocity at the nodes; acceleration and jerk
+    /// at the judged points of every interval in motion at both ends, as
+    /// [`Interpolant::SpeedInLength`] moves through it, with the exact
+    /// speed √x where the linear programs used its tangent; all three at
+    /// the speed's crests inside the intervals longer than a servo
+    /// period, where this schedule has them. On the intervals out of a stop and into one, the
     /// constant-jerk ramp the rest cap bounds, the acceleration at both
     /// ends by the interval's slope, as the programs judge it.
     pub fn limit_use(&self, kins: &dyn Kinematics) -> Result<ScheduleUse, ScheduleError> {
@@ -2338,7 +2344,15 @@ impl Schedule {
             // is under way at both.
             let points = JerkPoints::new(nodes, k, |i| x[i] == 0.0);
             let value = |form: &[f64; 4]| apply(form, &x, k - 1);
-            let crests = points.crests(&x, k - 1);
+            // Crests where the linear programs judge them: on intervals
+            // longer than a servo period (`continuous_jerk` and the
+            // samples measure the motion everywhere).
+            let long = nodes[k].h > self.period * x[k].max(x[k + 1]).sqrt();
+            let crests = if long {
+                points.crests(&x, k - 1)
+            } else {
+                [None, None]
+            };
             for crest in crests.iter().flatten() {
                 let xp = value(&crest.x).max(0.0);
                 for i in 0..9 {
