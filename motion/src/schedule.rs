@@ -29,7 +29,10 @@
 //! speed crests inside a half interval (u falls through zero), the jerk
 //! and the velocity are judged at the crest too, where the linear
 //! program's guess has it: with nodes several servo periods apart, the
-//! crests between the judged points read 1.009 of the jerk limit. The jerk limit
+//! crests between the judged points read 1.009 of the jerk limit. Where
+//! the speed dips inside a half, it is kept above half of the slower
+//! node's (a deeper dip the motion between nodes is not made to follow:
+//! see `interval_piece`). The jerk limit
 //! reads |p′_i·u′ + 3·p″_i·u + p‴_i·x| ≤ J_i/√x; 1/√x is convex, so its tangent at any x̄ lies below
 //! it, and with the tangent in its place the constraint is linear and
 //! stricter than the true one. Every solution of the linear program is
@@ -171,9 +174,9 @@ fn stride(start: &Geometry, inner: &[Geometry; INNER], end: &Geometry) -> usize 
 
 /// A crest whose x rises by less than this share above the half's
 /// start is not judged: the jerk there, √x·(…), exceeds the start's by
-/// half that share at most, and on a cruise at the velocity limit the
-/// speed's ripple in the solver's last digits made crests everywhere,
-/// rows so alike that a windowed line's linear program stalled.
+/// half that share at most, far inside the 1e-6. (On a cruise
+/// at the velocity limit the solver's last digits ripple the speed, and
+/// every interval would have a crest and rows of its own.)
 const CREST_RISE: f64 = 1e-7;
 
 /// Points inside an interval where the geometry is kept.
