@@ -391,6 +391,22 @@ fn quality(
         verdict(report.max_deviation <= allowed),
         verdict(most <= TARGET_LIMIT_USE),
     );
+    // Where a limit is broken, say where, so that the run need not be
+    // repeated to find it.
+    for limit in report.axes.iter().chain(&report.joints) {
+        for (what, used) in [
+            ("velocity", &limit.velocity),
+            ("acceleration", &limit.acceleration),
+            ("jerk", &limit.jerk),
+        ] {
+            if used.ratio > TARGET_LIMIT_USE {
+                println!(
+                    "  {}: {what} {:.6} of its limit at {:.3} s, line {}",
+                    limit.name, used.ratio, used.time, used.line
+                );
+            }
+        }
+    }
 }
 
 /// `-- --corpus`: planned / bound for every program of LinuxCNC's planner
