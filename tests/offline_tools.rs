@@ -531,3 +531,35 @@ fn offline_tools_take_the_machine_and_period_from_kerfds_configuration() {
         "{err}"
     );
 }
+
+/// `kerf plan --follow`: the executor follows the jerk-limited schedule
+/// (every stretch of a short program is solved in time), within every
+/// limit; a reserve outside 0 ≤ r < 1 is refused by the schedule before
+/// anything runs, naming the reserve.
+#[test]
+fn plan_follows_the_schedule_and_refuses_a_bad_reserve() {
+    let text = "G21 G90 G0 X10 Y10\nG1 F600 X16 Y10\nG1 X16 Y14\nG4 P0.1\nG1 X10 Y14\nM2\n";
+    let report = plan_json_with(text, &["--follow"]);
+    assert!(
+        report["stretches_followed"].as_u64().unwrap() >= 2,
+        "{report}"
+    );
+    assert!(
+        report["max_limit_ratio"].as_f64().unwrap() <= 1.0 + 1e-6,
+        "{report}"
+    );
+    let own = plan_json(text);
+    assert_eq!(own["stretches_followed"].as_u64(), Some(0), "{own}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let p = program(&dir, "plan.ngc", text);
+    let out = kerf(&["plan", &p, "--follow", "--reserve", "1.5"]);
+    assert!(!out.status.success());
+    assert!(
+        out.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("reserve") && err.contains("1.5"), "{err}");
+}

@@ -370,6 +370,25 @@ fn stellabee_head(lines: usize) -> Option<String> {
     Some(head.join("\n"))
 }
 
+/// stellabee1.ngc's first `lines` lines planned on `kins` and scheduled
+/// as `base` says but with nodes two a servo period apart, at least
+/// 0.01 mm; `None` without the shared conformance material.
+fn two_a_period_on_stellabee(
+    lines: usize,
+    kins: &dyn Kinematics,
+    base: ScheduleConfig,
+) -> Option<(Vec<Segment>, Schedule)> {
+    let head = stellabee_head(lines)?;
+    let segments = planned(&head, kins, Position::ZERO);
+    let spaced = ScheduleConfig {
+        ds: 0.01,
+        nodes_per_period: Some(2.0),
+        ..base
+    };
+    let found = schedule(&segments, kins, spaced).unwrap();
+    Some((segments, found))
+}
+
 /// Nodes spaced by speed on the dense profile stellabee1.ngc opens with
 /// (its first 25 lines: short lines and blends, nodes 0.05–0.08 mm apart
 /// and several servo periods each where the curves hold the speed down):
@@ -378,17 +397,12 @@ fn stellabee_head(lines: usize) -> Option<String> {
 /// motion read 1.009 of the jerk limit, and 1.0057 on its 1 ms samples.
 #[test]
 fn sparse_nodes_keep_the_jerk_where_the_speed_crests_between_them() {
-    let Some(head) = stellabee_head(25) else {
-        return;
-    };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    let spaced = ScheduleConfig {
-        ds: 0.01,
-        nodes_per_period: Some(2.0),
-        ..config()
+    let Some((segments, found)) = two_a_period_on_stellabee(25, kins, config()) else {
+        return;
     };
-    let (segments, found) = solved_with(&head, kins, Position::ZERO, spaced);
+    assert_eq!(found.failed, 0, "every linear program solved");
     let used = found.limit_use(kins).unwrap();
     let followed = found
         .sampled(&segments, kins, 0.001, Interpolant::SpeedInLength)
@@ -424,14 +438,9 @@ fn sparse_nodes_keep_the_jerk_where_the_speed_crests_between_them() {
 /// the jerk limit on the samples. No interval is flattened now.
 #[test]
 fn sparse_nodes_in_windows_never_dip_towards_rest_between_nodes() {
-    let Some(head) = stellabee_head(1400) else {
-        return;
-    };
     let machine = kerf_machines::load("mill3").unwrap();
     let kins = &*machine.kinematics;
-    let spaced = ScheduleConfig {
-        ds: 0.01,
-        nodes_per_period: Some(2.0),
+    let windowed = ScheduleConfig {
         window: Some(Window {
             horizon: 2000,
             commit: 500,
@@ -439,8 +448,9 @@ fn sparse_nodes_in_windows_never_dip_towards_rest_between_nodes() {
         reserve: 0.1,
         ..config()
     };
-    let segments = planned(&head, kins, Position::ZERO);
-    let found = schedule(&segments, kins, spaced).unwrap();
+    let Some((segments, found)) = two_a_period_on_stellabee(1400, kins, windowed) else {
+        return;
+    };
     let followed = found
         .sampled(&segments, kins, 0.001, Interpolant::SpeedInLength)
         .unwrap();

@@ -955,8 +955,8 @@ impl Sampler {
             // first guess's, of a profile under the acceleration limits
             // alone, are nowhere near the solution's, and with them a
             // window of a plain line found no solution from any guess.
-            let crests = pass > 0;
-            let Some(x) = self.linear_program(nodes, &guess, from, moving, crests) else {
+            let turns = pass > 0;
+            let Some(x) = self.linear_program(nodes, &guess, from, moving, turns) else {
                 out.failed += 1;
                 // The solver gave up (numerically): from a lower guess,
                 // whose tangents are steeper, while nothing was found;
@@ -1040,7 +1040,7 @@ impl Sampler {
         guess: &[f64],
         from: Start,
         moving: f64,
-        crests: bool,
+        turns: bool,
     ) -> Option<Vec<f64>> {
         let m = nodes.len();
         let (a_max, j_max) = (&self.limits.a, &self.limits.j);
@@ -1170,9 +1170,8 @@ impl Sampler {
             // over shorter ones they average the crest away (and at 0.01
             // mm nodes the crests' rows made a windowed line's linear
             // program stall).
-            let long = nodes[k].h > self.config.period * guess[k].max(guess[k + 1]).sqrt();
-            let crests_on = crests && !(rows.fixed.is_some() && k < 3);
-            let crests = if !crests_on || !long {
+            let turns = turns && !(rows.fixed.is_some() && k < 3);
+            let crests = if !turns || !outlasts_period(nodes, guess, k, self.config.period) {
                 [None, None]
             } else {
                 points.crests(guess, base)
@@ -1194,7 +1193,7 @@ impl Sampler {
             // (1.157 of it next to a stop, with nodes two a servo period
             // apart). x at a valley of the guess stays above half of x
             // at the node where the guess is slower.
-            if crests_on {
+            if turns {
                 let end = if guess[k] <= guess[k + 1] { 1 } else { 2 };
                 for valley in points.valleys(guess, base).iter().flatten() {
                     let terms: [(usize, f64); 4] = std::array::from_fn(|o| {
@@ -1269,6 +1268,13 @@ impl Sampler {
         x[m - 1] = 0.0;
         Some(x)
     }
+}
+
+/// Interval `k` lasts longer than `period` at `x` even at its faster
+/// node's speed: the servo's samples see inside it, so the speed's
+/// crests there are judged.
+fn outlasts_period(nodes: &[Node], x: &[f64], k: usize, period: f64) -> bool {
+    nodes[k].h > period * x[k].max(x[k + 1]).sqrt()
 }
 
 /// u = ½·dx/ds at node `j` as [`Interpolant::SpeedInLength`] takes it, as
@@ -2350,8 +2356,7 @@ impl Schedule {
             // Crests where the linear programs judge them: on intervals
             // longer than a servo period (`continuous_jerk` and the
             // samples measure the motion everywhere).
-            let long = nodes[k].h > self.period * x[k].max(x[k + 1]).sqrt();
-            let crests = if long {
+            let crests = if outlasts_period(nodes, &x, k, self.period) {
                 points.crests(&x, k - 1)
             } else {
                 [None, None]

@@ -175,7 +175,8 @@ enum Cmd {
         /// Follow a jerk-limited schedule solved alongside the planner
         /// where one is ready, as third-order planning would (machines
         /// whose joints are their axes; see docs/motion.md, "Following a
-        /// schedule"). Slower to plan: about a third of the motion's time.
+        /// schedule"). Slower to plan: about half the motion's time on
+        /// dense CAM paths, many times it where the feed sets the speed.
         #[arg(long)]
         follow: bool,
         /// With --follow: the share of every acceleration and jerk limit

@@ -154,24 +154,18 @@ pub fn plan(
 ) -> Result<(), Failure> {
     let machine = load(machine)?;
     let kins = &*machine.kinematics;
-    let follow = match follow {
-        None => None,
-        Some(reserve) if (0.0..1.0).contains(&reserve) => {
-            let default = FollowConfig::default();
-            Some(FollowConfig {
-                schedule: ScheduleConfig {
-                    reserve,
-                    ..default.schedule
-                },
-                ..default
-            })
+    // The reserve is checked where the schedule is made
+    // (`ScheduleError::Reserve`), before anything runs.
+    let follow = follow.map(|reserve| {
+        let default = FollowConfig::default();
+        FollowConfig {
+            schedule: ScheduleConfig {
+                reserve,
+                ..default.schedule
+            },
+            ..default
         }
-        Some(reserve) => {
-            return Err(Failure::new(format!(
-                "--reserve {reserve}: the share of the limits kept for override is at least 0 and below 1"
-            )))
-        }
-    };
+    });
     let config = RunConfig {
         planner: PlannerConfig {
             jerk_limited: !trapezoidal,

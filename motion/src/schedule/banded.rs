@@ -404,7 +404,6 @@ impl Scaled<'_> {
         let mut z = vec![1.0; m];
         let c_size = 1.0 + self.c.iter().fold(0.0f64, |b, c| b.max(c.abs()));
 
-        let mut gx = vec![0.0; m];
         let mut rp = vec![0.0; m];
         let mut rd = vec![0.0; n];
         let mut rc = vec![0.0; m];
@@ -412,7 +411,6 @@ impl Scaled<'_> {
         let mut dx = vec![0.0; n];
         let mut ds = vec![0.0; m];
         let mut dz = vec![0.0; m];
-        let mut gdx = vec![0.0; m];
         let mut normal = Banded::zeros(n);
         let mut refine = Vec::with_capacity(n);
         // The iterate with the smallest dual residual and gap among those
@@ -428,8 +426,7 @@ impl Scaled<'_> {
             rd.copy_from_slice(self.c);
             normal.clear();
             for r in 0..m {
-                gx[r] = self.row_times(r, &x);
-                rp[r] = gx[r] + s[r] - self.h[r];
+                rp[r] = self.row_times(r, &x) + s[r] - self.h[r];
                 self.add_row_times(r, z[r], &mut rd);
                 normal.add_row(self.first[r], &self.g[r], z[r] / s[r]);
             }
@@ -470,34 +467,29 @@ impl Scaled<'_> {
 
             // The Newton direction for complementarity target r_c:
             // Gᵀ·W·G·Δx = −r_d + Gᵀ·S⁻¹·(r_c − Z·r_p), then Δs and Δz.
-            let mut direction = |rc: &[f64],
-                                 t: &mut [f64],
-                                 dx: &mut [f64],
-                                 ds: &mut [f64],
-                                 dz: &mut [f64],
-                                 gdx: &mut [f64]| {
-                // Row by row, each sweep doing all it can with the row in
-                // hand (see the sweep at the top of the step).
-                for (dx, rd) in dx.iter_mut().zip(&rd) {
-                    *dx = -rd;
-                }
-                for r in 0..m {
-                    t[r] = (rc[r] - z[r] * rp[r]) / s[r];
-                    self.add_row_times(r, t[r], dx);
-                }
-                normal.solve_refined(dx, &mut refine);
-                for r in 0..m {
-                    gdx[r] = self.row_times(r, dx);
-                    ds[r] = -rp[r] - gdx[r];
-                    dz[r] = -(rc[r] + z[r] * ds[r]) / s[r];
-                }
-            };
+            let mut direction =
+                |rc: &[f64], t: &mut [f64], dx: &mut [f64], ds: &mut [f64], dz: &mut [f64]| {
+                    // Row by row, each sweep doing all it can with the row in
+                    // hand (see the sweep at the top of the step).
+                    for (dx, rd) in dx.iter_mut().zip(&rd) {
+                        *dx = -rd;
+                    }
+                    for r in 0..m {
+                        t[r] = (rc[r] - z[r] * rp[r]) / s[r];
+                        self.add_row_times(r, t[r], dx);
+                    }
+                    normal.solve_refined(dx, &mut refine);
+                    for r in 0..m {
+                        ds[r] = -rp[r] - self.row_times(r, dx);
+                        dz[r] = -(rc[r] + z[r] * ds[r]) / s[r];
+                    }
+                };
 
             // Predictor: the affine-scaling direction.
             for r in 0..m {
                 rc[r] = s[r] * z[r];
             }
-            direction(&rc, &mut t, &mut dx, &mut ds, &mut dz, &mut gdx);
+            direction(&rc, &mut t, &mut dx, &mut ds, &mut dz);
             let (ap, ad) = (step_to_boundary(&s, &ds), step_to_boundary(&z, &dz));
             let affine_gap: f64 = (0..m)
                 .map(|r| (s[r] + ap * ds[r]) * (z[r] + ad * dz[r]))
@@ -508,7 +500,7 @@ impl Scaled<'_> {
             for r in 0..m {
                 rc[r] = s[r] * z[r] + ds[r] * dz[r] - sigma * mu;
             }
-            direction(&rc, &mut t, &mut dx, &mut ds, &mut dz, &mut gdx);
+            direction(&rc, &mut t, &mut dx, &mut ds, &mut dz);
             let ap = (STEP_SHARE * step_to_boundary(&s, &ds)).min(1.0);
             let ad = (STEP_SHARE * step_to_boundary(&z, &dz)).min(1.0);
             for i in 0..n {
